@@ -1,0 +1,343 @@
+//! The spring–dashpot contact law with tangential history and Coulomb friction.
+//!
+//! Implements 000_260a8780d7c638a6 Appendix A (A1–A3) and 002_89269f1b918188b3 §2.4 (2.17–2.19).
+//! Conventions (002): r_ij = x_i - x_j, n = r_ij/|r_ij| (points from j to i), overlap
+//! delta = R_i + R_j - |r_ij|, relative surface velocity at the contact point
+//!   v_ij = v_i - v_j - (R_i w_i + R_j w_j) x n                          (002 2.18b, polydisperse)
+//! Normal force on i (A1 / 2.17a):   F_n = s (k_n delta n) - s_d c_n v_n
+//! Tangential (A2 / 2.17b):          F_t = -s k_t u - s_d c_t v_t,  |F_t| <= mu |F_n|
+//! with s = s_d = 1 for the linear law and s = (delta/d_ij)^(1/2) for Hertz (a = 1/2 in A1),
+//! d_ij = R_i + R_j the mean diameter of the pair.
+//!
+//! The law is generic over its *form* (Hooke/Hertz) and its *friction* (Coulomb or none); with
+//! `Frictionless` the history type is `()`, so no history is allocated, stored or updated.
+
+use crate::error::{Error, Result};
+use crate::V3;
+use std::marker::PhantomData;
+
+/// How the user specifies the normal damping.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Damping {
+    /// Normal coefficient of restitution e_n in (0, 1]; the damping is derived per pair so that
+    /// every pair, whatever its effective mass, rebounds with exactly e_n (linear law; Hertz via a
+    /// velocity-independent dashpot, see [`Hertz`]).
+    Restitution(f64),
+    /// Damping rate xi_n (units 1/time) as in A1 / 2.17a: damping force = m_eff xi_n v_n.
+    Rate(f64),
+}
+
+/// User-level parameters of one contact law (particle–particle or particle–wall).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LawParams {
+    pub kn: f64,
+    /// Tangential stiffness; default 2/7 kn (000 App. A).
+    pub kt: f64,
+    pub damping: Damping,
+    /// xi_t / xi_n; default 1/2 (both papers).
+    pub xi_t_ratio: f64,
+    /// Coulomb friction coefficient mu (mu_p in 000, mu_s in 002).
+    pub mu: f64,
+}
+
+impl LawParams {
+    pub fn new(kn: f64, e_n: f64, mu: f64) -> Self {
+        LawParams {
+            kn,
+            kt: 2.0 / 7.0 * kn,
+            damping: Damping::Restitution(e_n),
+            xi_t_ratio: 0.5,
+            mu,
+        }
+    }
+
+    pub fn validate(&self, prefix: &str) -> Result<()> {
+        let name = |s: &str| format!("{prefix}{s}");
+        crate::error::check_positive(&name("kn"), self.kn)?;
+        if !(self.kt.is_finite() && self.kt >= 0.0) {
+            return Err(Error::param(name("kt"), self.kt, "a finite number >= 0"));
+        }
+        match self.damping {
+            Damping::Restitution(e) => {
+                if !(e.is_finite() && e > 0.0 && e <= 1.0) {
+                    return Err(Error::param(name("e_n"), e, "0 < e_n <= 1").with_hint(
+                        "e_n = 0 would need infinite damping; the linear law is critically \
+                         damped as e_n -> 0",
+                    ));
+                }
+            }
+            Damping::Rate(x) => {
+                if !(x.is_finite() && x >= 0.0) {
+                    return Err(Error::param(name("xi_n"), x, "a finite number >= 0"));
+                }
+            }
+        }
+        if !(self.xi_t_ratio.is_finite() && self.xi_t_ratio >= 0.0) {
+            return Err(Error::param(
+                name("xi_t_ratio"),
+                self.xi_t_ratio,
+                "a finite number >= 0",
+            ));
+        }
+        if !(self.mu.is_finite() && self.mu >= 0.0) {
+            return Err(Error::param(name("mu"), self.mu, "a finite number >= 0"));
+        }
+        Ok(())
+    }
+
+    /// zeta such that the per-pair damping rate is xi_n = zeta sqrt(kn/m_eff) for a given e_n:
+    /// from e_n = exp(-xi_n t_c/2), t_c = pi / sqrt(kn/m_eff - xi_n^2/4) (000 App. A) it follows
+    /// that zeta = 2|ln e| / sqrt(pi^2 + ln^2 e) (< 2, i.e. always under-damped).
+    pub fn zeta(e_n: f64) -> f64 {
+        let l = e_n.ln();
+        2.0 * l.abs() / (std::f64::consts::PI.powi(2) + l * l).sqrt()
+    }
+
+    /// Contact duration of the linear law for a pair of effective mass m_eff.
+    /// Errors if the pair is over-damped (no oscillation: the linear law has no t_c).
+    pub fn contact_time(&self, m_eff: f64) -> Result<f64> {
+        let w0sq = self.kn / m_eff;
+        let xi = match self.damping {
+            Damping::Restitution(e) => Self::zeta(e) * w0sq.sqrt(),
+            Damping::Rate(x) => x,
+        };
+        let arg = w0sq - 0.25 * xi * xi;
+        if arg <= 0.0 {
+            return Err(Error::param(
+                "xi_n",
+                xi,
+                format!(
+                    "< 2 sqrt(kn/m_eff) = {:.6e} for the lightest pair (m_eff = {m_eff:.4e})",
+                    2.0 * w0sq.sqrt()
+                ),
+            )
+            .with_hint(
+                "the linear spring-dashpot is over-damped there: it has no contact time and no \
+                 restitution; give e_n instead or reduce xi_n",
+            ));
+        }
+        Ok(std::f64::consts::PI / arg.sqrt())
+    }
+}
+
+/// Normal form of the law: linear (a = 0) or Hertzian (a = 1/2).
+pub trait Form: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
+    const NAME: &'static str;
+    /// (spring factor s, dashpot factor s_d) for overlap delta and pair mean diameter d.
+    fn factors(delta: f64, d: f64, tsuji: bool) -> (f64, f64);
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Hooke;
+impl Form for Hooke {
+    const NAME: &'static str = "hooke";
+    #[inline(always)]
+    fn factors(_: f64, _: f64, _: bool) -> (f64, f64) {
+        (1.0, 1.0)
+    }
+}
+
+/// Hertz: spring factor (delta/d)^(1/2) (A1 with a = 1/2). With damping given as a rate the
+/// dashpot carries the same factor (exactly A1, as LAMMPS `hertz/history`). With damping given as
+/// e_n, the dashpot factor is (delta/d)^(1/4) (Tsuji et al. 1992): only then is the restitution
+/// independent of impact velocity, so that e_n can be a material parameter. Documented deviation.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Hertz;
+impl Form for Hertz {
+    const NAME: &'static str = "hertz";
+    #[inline(always)]
+    fn factors(delta: f64, d: f64, tsuji: bool) -> (f64, f64) {
+        let s = (delta / d).sqrt();
+        (s, if tsuji { s.sqrt() } else { s })
+    }
+}
+
+/// Tangential part of the law.
+pub trait Friction: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
+    /// Per-contact tangential history: `[f64; 3]` with friction, `()` without.
+    type History: Copy + Default + Send + Sync + 'static + std::fmt::Debug + PartialEq;
+    const FRICTIONAL: bool;
+    const NAME: &'static str;
+    /// Tangential force on i; updates the history.
+    #[allow(clippy::too_many_arguments)]
+    fn tangential(
+        kt: f64,
+        ct: f64,
+        mu: f64,
+        fn_mag: f64,
+        n: &V3,
+        vt: &V3,
+        hist: &mut Self::History,
+        dt: f64,
+    ) -> V3;
+    /// Negate a history (the pair's orientation i <-> j was swapped).
+    fn flip(h: Self::History) -> Self::History;
+    fn to_array(h: &Self::History) -> [f64; 3];
+    fn from_array(a: [f64; 3]) -> Self::History;
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Frictionless;
+impl Friction for Frictionless {
+    type History = ();
+    const FRICTIONAL: bool = false;
+    const NAME: &'static str = "frictionless";
+    #[inline(always)]
+    fn tangential(_: f64, _: f64, _: f64, _: f64, _: &V3, _: &V3, _: &mut (), _: f64) -> V3 {
+        V3::zeros()
+    }
+    fn flip(_: ()) {}
+    fn to_array(_: &()) -> [f64; 3] {
+        [0.0; 3]
+    }
+    fn from_array(_: [f64; 3]) {}
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Coulomb;
+impl Friction for Coulomb {
+    type History = [f64; 3];
+    const FRICTIONAL: bool = true;
+    const NAME: &'static str = "coulomb";
+    #[inline(always)]
+    fn tangential(
+        kt: f64,
+        ct: f64,
+        mu: f64,
+        fn_mag: f64,
+        n: &V3,
+        vt: &V3,
+        hist: &mut [f64; 3],
+        dt: f64,
+    ) -> V3 {
+        let mut u = V3::new(hist[0], hist[1], hist[2]);
+        // A3 / 2.19: the elastic displacement is carried along by the rotation of the contact
+        // normal: the correction term keeps u in the tangent plane without changing |u| (it is a
+        // rotation). Discretely: project onto the current plane and restore the magnitude.
+        let u2 = u.norm_squared();
+        if u2 > 0.0 {
+            u -= u.dot(n) * n;
+            let p2 = u.norm_squared();
+            if p2 > 0.0 {
+                u *= (u2 / p2).sqrt();
+            }
+        }
+        u += vt * dt;
+        let mut ft = -kt * u - ct * vt;
+        let ft2 = ft.norm_squared();
+        let lim = mu * fn_mag;
+        if ft2 > lim * lim {
+            // Sliding (A2 second line): cap |F_t| at mu |F_n| and rescale the spring so that the
+            // stored displacement is consistent with the capped force.
+            let scale = lim / ft2.sqrt();
+            ft *= scale;
+            if kt > 0.0 {
+                u = -(ft + ct * vt) / kt;
+            }
+        }
+        *hist = [u.x, u.y, u.z];
+        ft
+    }
+    fn flip(h: [f64; 3]) -> [f64; 3] {
+        [-h[0], -h[1], -h[2]]
+    }
+    fn to_array(h: &[f64; 3]) -> [f64; 3] {
+        *h
+    }
+    fn from_array(a: [f64; 3]) -> [f64; 3] {
+        a
+    }
+}
+
+/// A contact law ready to evaluate: form `F`, friction `T`.
+#[derive(Clone, Copy, Debug)]
+pub struct Law<F: Form, T: Friction> {
+    pub params: LawParams,
+    kn: f64,
+    kt: f64,
+    /// Normal damping coefficient (force per velocity) = alpha m_eff + beta sqrt(m_eff): covers
+    /// both the rate form (alpha = xi_n, beta = 0) and the restitution form (alpha = 0,
+    /// beta = zeta sqrt(kn)) without a branch in the hot loop.
+    alpha: f64,
+    beta: f64,
+    ratio_t: f64,
+    mu: f64,
+    tsuji: bool,
+    _p: PhantomData<(F, T)>,
+}
+
+/// Output of one pair evaluation: total force on i and the tangential force on i.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PairForce {
+    pub f: V3,
+    pub ft: V3,
+}
+
+impl<F: Form, T: Friction> Law<F, T> {
+    pub fn new(params: LawParams) -> Result<Self> {
+        params.validate("")?;
+        let (alpha, beta, tsuji) = match params.damping {
+            Damping::Restitution(e) => (0.0, LawParams::zeta(e) * params.kn.sqrt(), true),
+            Damping::Rate(x) => (x, 0.0, false),
+        };
+        Ok(Law {
+            params,
+            kn: params.kn,
+            kt: params.kt,
+            alpha,
+            beta,
+            ratio_t: params.xi_t_ratio,
+            mu: params.mu,
+            tsuji,
+            _p: PhantomData,
+        })
+    }
+
+    pub fn name() -> String {
+        format!("{}/{}", F::NAME, T::NAME)
+    }
+
+    /// Normal damping coefficient (force per unit normal velocity) for a pair of mass m_eff.
+    #[inline(always)]
+    pub fn damping_coefficient(&self, m_eff: f64) -> f64 {
+        self.alpha * m_eff + self.beta * m_eff.sqrt()
+    }
+
+    /// Evaluate the law for a pair in contact.
+    /// `n`: unit normal (from j to i), `delta` > 0 overlap, `d` pair mean diameter,
+    /// `vrel`: relative surface velocity of i w.r.t. j at the contact.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn eval(
+        &self,
+        n: &V3,
+        delta: f64,
+        d: f64,
+        m_eff: f64,
+        vrel: &V3,
+        hist: &mut T::History,
+        dt: f64,
+    ) -> PairForce {
+        let (s, sd) = F::factors(delta, d, self.tsuji);
+        let cn = self.damping_coefficient(m_eff) * sd;
+        let vn_s = vrel.dot(n);
+        let fn_s = s * self.kn * delta - cn * vn_s;
+        let fnv = fn_s * n;
+        let ft = if T::FRICTIONAL {
+            let vt = vrel - vn_s * n;
+            T::tangential(
+                s * self.kt,
+                self.ratio_t * cn,
+                self.mu,
+                fn_s.abs(),
+                n,
+                &vt,
+                hist,
+                dt,
+            )
+        } else {
+            V3::zeros()
+        };
+        PairForce { f: fnv + ft, ft }
+    }
+}

@@ -1,0 +1,165 @@
+//! Simulation domains. A domain answers geometric questions (minimum image, wrapping,
+//! fractional coordinates for binning) and owns the integration of the equations of motion,
+//! because a deforming cell (Parrinello–Rahman) changes how particles move.
+//!
+//! [`OrthoBox`] is an orthogonal box with a periodic flag per axis: fully periodic for a bulk
+//! packing, periodic in y and z only for the channel (walls at x = lo and x = hi are a separate
+//! component, see `engine::Walls`). The triclinic stress-controlled cell lives in `cell`.
+
+use crate::error::{Error, Result};
+use crate::particles::Particles;
+use crate::{M3, V3};
+
+pub trait Domain: Clone + Send + Sync + 'static {
+    const NAME: &'static str;
+    /// Whether the integrator needs the contact virial sum_pairs r_ij (x) f_ij every step.
+    const NEEDS_VIRIAL: bool = false;
+    fn periodic(&self) -> [bool; 3];
+    /// Minimum-image displacement x_i - x_j.
+    fn delta(&self, xi: &V3, xj: &V3) -> V3;
+    /// Wrap a position into the primary cell, updating its image counter.
+    fn wrap(&self, x: &mut V3, image: &mut [i32; 3]);
+    /// Fractional coordinates in [0, 1) along the three cell vectors (clamped on walled axes).
+    fn frac(&self, x: &V3) -> V3;
+    /// Distances between opposite faces of the cell (bin counts follow from them).
+    fn widths(&self) -> V3;
+    fn volume(&self) -> f64;
+    /// Cell matrix (columns are the cell vectors).
+    fn h(&self) -> M3;
+    /// Origin of the cell.
+    fn origin(&self) -> V3;
+
+    /// First half of velocity Verlet: half-kick then drift (LAMMPS `nve/sphere` initial_integrate).
+    fn integrate_initial(&mut self, p: &mut Particles, dt: f64) {
+        nve_initial(p, dt);
+    }
+    /// Second half-kick after the forces (LAMMPS `nve/sphere` final_integrate).
+    /// `virial` is sum_pairs r_ij (x) f_ij when `NEEDS_VIRIAL`, zero otherwise.
+    fn integrate_final(&mut self, p: &mut Particles, dt: f64, _virial: &M3) {
+        nve_final(p, dt);
+    }
+    /// Whether the cell changed enough since the last neighbour build to force a rebuild.
+    fn rebuild_due(&self, _skin: f64) -> bool {
+        false
+    }
+    /// Called after every neighbour-list rebuild.
+    fn on_rebuild(&mut self) {}
+}
+
+/// Velocity Verlet, first half (translation and rotation of spheres).
+pub fn nve_initial(p: &mut Particles, dt: f64) {
+    use rayon::prelude::*;
+    let h = 0.5 * dt;
+    p.x.par_iter_mut()
+        .zip(p.v.par_iter_mut())
+        .zip(p.omega.par_iter_mut())
+        .zip(p.force.par_iter())
+        .zip(p.torque.par_iter())
+        .zip(p.inv_mass.par_iter())
+        .zip(p.inv_inertia.par_iter())
+        .with_min_len(1024)
+        .for_each(|((((((x, v), w), f), t), im), ii)| {
+            let vn = *v + f * (h * im);
+            *v = vn;
+            *x += vn * dt;
+            *w += t * (h * ii);
+        });
+}
+
+/// Velocity Verlet, second half.
+pub fn nve_final(p: &mut Particles, dt: f64) {
+    use rayon::prelude::*;
+    let h = 0.5 * dt;
+    p.v.par_iter_mut()
+        .zip(p.omega.par_iter_mut())
+        .zip(p.force.par_iter())
+        .zip(p.torque.par_iter())
+        .zip(p.inv_mass.par_iter())
+        .zip(p.inv_inertia.par_iter())
+        .with_min_len(1024)
+        .for_each(|(((((v, w), f), t), im), ii)| {
+            *v += f * (h * im);
+            *w += t * (h * ii);
+        });
+}
+
+/// Orthogonal box [lo, lo + len) with a periodic flag per axis.
+#[derive(Clone, Debug)]
+pub struct OrthoBox {
+    pub lo: V3,
+    pub len: V3,
+    pub periodic: [bool; 3],
+}
+
+impl OrthoBox {
+    pub fn new(lo: V3, len: V3, periodic: [bool; 3]) -> Result<Self> {
+        for k in 0..3 {
+            let name = ["box length x", "box length y", "box length z"][k];
+            crate::error::check_positive(name, len[k])?;
+            if !lo[k].is_finite() {
+                return Err(Error::param("box origin", lo[k], "finite"));
+            }
+        }
+        Ok(OrthoBox { lo, len, periodic })
+    }
+    pub fn periodic_cube(l: f64) -> Result<Self> {
+        Self::new(V3::zeros(), V3::new(l, l, l), [true; 3])
+    }
+}
+
+impl Domain for OrthoBox {
+    const NAME: &'static str = "orthogonal box";
+    fn periodic(&self) -> [bool; 3] {
+        self.periodic
+    }
+    #[inline(always)]
+    fn delta(&self, xi: &V3, xj: &V3) -> V3 {
+        let mut d = xi - xj;
+        for k in 0..3 {
+            if self.periodic[k] {
+                let l = self.len[k];
+                d[k] -= l * (d[k] / l).round();
+            }
+        }
+        d
+    }
+    #[inline]
+    fn wrap(&self, x: &mut V3, image: &mut [i32; 3]) {
+        for k in 0..3 {
+            if self.periodic[k] {
+                let l = self.len[k];
+                let s = ((x[k] - self.lo[k]) / l).floor();
+                if s != 0.0 {
+                    x[k] -= s * l;
+                    image[k] += s as i32;
+                    // guard against x == lo + len after rounding
+                    if x[k] >= self.lo[k] + l {
+                        x[k] -= l;
+                        image[k] += 1;
+                    }
+                }
+            }
+        }
+    }
+    #[inline]
+    fn frac(&self, x: &V3) -> V3 {
+        let mut s = V3::zeros();
+        for k in 0..3 {
+            let f = (x[k] - self.lo[k]) / self.len[k];
+            s[k] = f.clamp(0.0, 1.0 - 1e-12);
+        }
+        s
+    }
+    fn widths(&self) -> V3 {
+        self.len
+    }
+    fn volume(&self) -> f64 {
+        self.len.x * self.len.y * self.len.z
+    }
+    fn h(&self) -> M3 {
+        M3::from_diagonal(&self.len)
+    }
+    fn origin(&self) -> V3 {
+        self.lo
+    }
+}

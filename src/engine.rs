@@ -1,0 +1,566 @@
+//! The time step, generic over its parts: contact law (form `F`, friction `T`), domain `D`,
+//! walls `W` and body force `G`. A scene without walls or gravity has none of their code in its
+//! step (`W::ON`, `G::ON` are constants, so the branches compile away).
+//!
+//! One step (velocity Verlet, as LAMMPS `nve/sphere`):
+//! 1. half-kick and drift (the domain integrates: a deforming cell moves particles too);
+//! 2. wrap into the cell; rebuild the pair list if a particle moved more than half the skin;
+//! 3. pair forces into a per-pair buffer (parallel over fixed chunks of pairs), then each particle
+//!    gathers its pairs in list order plus walls and gravity (parallel over fixed chunks of
+//!    particles). Every floating-point sum has an order that does not depend on the thread count,
+//!    so 1 and 2 threads give the same bits;
+//! 4. second half-kick (and the cell's momentum update).
+
+use crate::contact::{Form, Friction, Law, LawParams};
+use crate::domain::Domain;
+use crate::error::{Error, Result};
+use crate::neighbor::NeighborList;
+use crate::particles::Particles;
+use crate::{M3, V3};
+use rayon::prelude::*;
+
+/// Pairs per work unit of the force loop (fixed: results must not depend on thread count).
+const PAIR_CHUNK: usize = 2048;
+/// Particles per work unit of the gather loop.
+const PART_CHUNK: usize = 1024;
+/// Most planar walls a scene can have (two side walls and a temporary floor).
+pub const MAX_WALLS: usize = 3;
+
+/// A planar wall: the plane x[axis] = pos, particles on the side `sign` (+1: x > pos).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    pub axis: usize,
+    pub pos: f64,
+    pub sign: f64,
+}
+
+/// Walls as a component. `NoWalls` compiles to nothing.
+pub trait Walls<F: Form, T: Friction>: Clone + Send + Sync + 'static {
+    const ON: bool;
+    fn planes(&self) -> &[Plane];
+    fn law(&self) -> Option<&Law<F, T>>;
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoWalls;
+impl<F: Form, T: Friction> Walls<F, T> for NoWalls {
+    const ON: bool = false;
+    fn planes(&self) -> &[Plane] {
+        &[]
+    }
+    fn law(&self) -> Option<&Law<F, T>> {
+        None
+    }
+}
+
+/// Flat frictional walls (planes of infinite mass) with their own law and per-particle history.
+#[derive(Clone, Debug)]
+pub struct PlaneWalls<F: Form, T: Friction> {
+    pub planes: Vec<Plane>,
+    pub law: Law<F, T>,
+}
+
+impl<F: Form, T: Friction> PlaneWalls<F, T> {
+    pub fn new(planes: Vec<Plane>, params: LawParams) -> Result<Self> {
+        if planes.len() > MAX_WALLS {
+            return Err(Error::param("walls", planes.len(), format!("at most {MAX_WALLS}")));
+        }
+        params.validate("wall_")?;
+        Ok(PlaneWalls {
+            planes,
+            law: Law::new(params)?,
+        })
+    }
+}
+
+impl<F: Form, T: Friction> Walls<F, T> for PlaneWalls<F, T> {
+    const ON: bool = true;
+    fn planes(&self) -> &[Plane] {
+        &self.planes
+    }
+    fn law(&self) -> Option<&Law<F, T>> {
+        Some(&self.law)
+    }
+}
+
+/// Uniform body force per unit mass (gravity) as a component.
+pub trait Body: Clone + Send + Sync + 'static {
+    const ON: bool;
+    fn g(&self) -> V3;
+}
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoBody;
+impl Body for NoBody {
+    const ON: bool = false;
+    fn g(&self) -> V3 {
+        V3::zeros()
+    }
+}
+#[derive(Clone, Copy, Debug)]
+pub struct Gravity(pub V3);
+impl Body for Gravity {
+    const ON: bool = true;
+    fn g(&self) -> V3 {
+        self.0
+    }
+}
+
+/// Per-pair result of the force loop: force on i, and q = -(n x F_t) so that the torques are
+/// R_i q on i and R_j q on j.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PairOut {
+    pub f: V3,
+    pub q: V3,
+}
+
+/// What the last force evaluation saw (for guards, diagnostics and samplers).
+#[derive(Clone, Debug, Default)]
+pub struct StepDiag {
+    /// Largest overlap / (pair mean diameter) among pair and wall contacts.
+    pub max_overlap: f64,
+    /// Particle indices (current order) of that contact (wall: second is usize::MAX).
+    pub max_overlap_at: (usize, usize),
+    /// Total force exerted by the particles on each wall (minus the force on the particles).
+    pub wall_force: [V3; MAX_WALLS],
+    /// sum over pairs of r_ij (x) f_ij (computed when the domain needs it or `want_virial`).
+    pub virial: M3,
+    pub contacts: usize,
+}
+
+/// Run-time guards: stop with a clear error instead of writing NaN.
+#[derive(Clone, Debug)]
+pub struct Guards {
+    /// Largest overlap allowed, as a fraction of the pair mean diameter.
+    pub max_overlap: f64,
+    /// Check positions and velocities for NaN/inf every this many steps.
+    pub check_every: u64,
+}
+impl Default for Guards {
+    fn default() -> Self {
+        Guards {
+            max_overlap: 0.25,
+            check_every: 50,
+        }
+    }
+}
+
+pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
+    pub p: Particles,
+    pub law: Law<F, T>,
+    pub domain: D,
+    pub walls: W,
+    pub body: G,
+    pub nl: NeighborList<T>,
+    /// Per-particle wall histories (empty without walls; zero-sized without friction).
+    pub wall_hist: Vec<[T::History; MAX_WALLS]>,
+    pub dt: f64,
+    pub step: u64,
+    pub time: f64,
+    pub guards: Guards,
+    pub diag: StepDiag,
+    /// Ask the next force evaluation for the virial (samplers set this).
+    pub want_virial: bool,
+    /// Per-pair forces of the last evaluation (list order).
+    pub pair_out: Vec<PairOut>,
+    forces_valid: bool,
+}
+
+/// Contact duration of the stiffest, lightest pair for a law and a particle set.
+pub fn min_contact_time(params: &LawParams, p: &Particles) -> Result<f64> {
+    let m = p.min_mass();
+    params.contact_time(0.5 * m)
+}
+
+impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W, G> {
+    /// Build an engine. `dt = None` picks t_c/50 of the stiffest, lightest pair.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        p: Particles,
+        law: LawParams,
+        domain: D,
+        walls: W,
+        body: G,
+        dt: Option<f64>,
+        skin: f64,
+    ) -> Result<Self> {
+        if p.is_empty() {
+            return Err(Error::param("particles", 0, "at least 1 particle"));
+        }
+        let law = Law::<F, T>::new(law)?;
+        let tc = min_contact_time(&law.params, &p)?;
+        if let Some(wl) = walls.law() {
+            // wall contacts: m_eff = m (infinite wall mass); check they are not over-damped
+            wl.params.contact_time(p.min_mass())?;
+        }
+        let dt = match dt {
+            None => tc / 50.0,
+            Some(dt) => {
+                if !(dt.is_finite() && dt > 0.0) {
+                    return Err(Error::param("dt", dt, "a finite number > 0"));
+                }
+                if dt > tc / 10.0 {
+                    return Err(Error::param("dt", dt, format!("<= t_c/10 = {:.4e}", tc / 10.0))
+                        .with_hint(format!(
+                            "t_c = {tc:.4e} is the contact time of the stiffest, lightest pair; \
+                             the default dt is t_c/50"
+                        )));
+                }
+                dt
+            }
+        };
+        if !(skin.is_finite() && skin >= 0.0) {
+            return Err(Error::param("skin", skin, "a finite number >= 0"));
+        }
+        let rmax = p.max_radius();
+        let w = domain.widths();
+        for k in 0..3 {
+            if domain.periodic()[k] && w[k] < 2.0 * (2.0 * rmax + skin) {
+                return Err(Error::param(
+                    format!("box width along axis {k}"),
+                    w[k],
+                    format!(
+                        ">= 2 (d_max + skin) = {:.4} for a periodic axis",
+                        2.0 * (2.0 * rmax + skin)
+                    ),
+                )
+                .with_hint("the box is too small for the largest particle"));
+            }
+            if !domain.periodic()[k] && w[k] < 2.0 * rmax {
+                return Err(Error::param(
+                    format!("box width along axis {k}"),
+                    w[k],
+                    format!(">= d_max = {:.4}", 2.0 * rmax),
+                ));
+            }
+        }
+        let n = p.len();
+        let wall_hist = if W::ON {
+            vec![[T::History::default(); MAX_WALLS]; n]
+        } else {
+            Vec::new()
+        };
+        let mut e = Engine {
+            p,
+            law,
+            domain,
+            walls,
+            body,
+            nl: NeighborList::new(skin),
+            wall_hist,
+            dt,
+            step: 0,
+            time: 0.0,
+            guards: Guards::default(),
+            diag: StepDiag::default(),
+            want_virial: false,
+            pair_out: Vec::new(),
+            forces_valid: false,
+        };
+        e.wrap_all();
+        e.rebuild();
+        Ok(e)
+    }
+
+    /// Contact time of the stiffest, lightest pair.
+    pub fn contact_time(&self) -> f64 {
+        min_contact_time(&self.law.params, &self.p).unwrap_or(f64::NAN)
+    }
+
+    pub fn wrap_all(&mut self) {
+        let dom = &self.domain;
+        self.p
+            .x
+            .par_iter_mut()
+            .zip(self.p.image.par_iter_mut())
+            .with_min_len(4096)
+            .for_each(|(x, im)| dom.wrap(x, im));
+    }
+
+    pub fn rebuild(&mut self) {
+        let perm = self.nl.build(&mut self.p, &self.domain);
+        if !perm.is_empty() && W::ON {
+            let old = std::mem::take(&mut self.wall_hist);
+            self.wall_hist = perm.iter().map(|&k| old[k]).collect();
+        }
+        self.domain.on_rebuild();
+        self.pair_out.resize(self.nl.len(), PairOut::default());
+    }
+
+    /// Mark the state as changed from outside (positions or velocities set by the user).
+    pub fn invalidate(&mut self) {
+        self.nl.valid = false;
+        self.forces_valid = false;
+    }
+
+    /// Make sure forces correspond to the current state (needed before the first step).
+    pub fn ensure_forces(&mut self) -> Result<()> {
+        if !self.forces_valid {
+            self.wrap_all();
+            if self.nl.needs_rebuild(&self.p, &self.domain) {
+                self.rebuild();
+            }
+            self.compute_forces();
+            self.check_overlap()?;
+        }
+        Ok(())
+    }
+
+    /// Advance `n` steps.
+    pub fn run(&mut self, n: u64) -> Result<()> {
+        self.ensure_forces()?;
+        for _ in 0..n {
+            self.step_once()?;
+        }
+        Ok(())
+    }
+
+    fn step_once(&mut self) -> Result<()> {
+        let dt = self.dt;
+        self.domain.integrate_initial(&mut self.p, dt);
+        self.wrap_all();
+        if self.nl.needs_rebuild(&self.p, &self.domain) || self.domain.rebuild_due(self.nl.skin)
+        {
+            self.rebuild();
+        }
+        self.compute_forces();
+        let vir = self.diag.virial;
+        self.domain.integrate_final(&mut self.p, dt, &vir);
+        self.step += 1;
+        self.time += dt;
+        self.check_overlap()?;
+        if self.step % self.guards.check_every == 0 {
+            self.check_finite()?;
+        }
+        Ok(())
+    }
+
+    fn check_overlap(&self) -> Result<()> {
+        let d = &self.diag;
+        if !(d.max_overlap <= self.guards.max_overlap) {
+            let (i, j) = d.max_overlap_at;
+            let mut ids = vec![self.p.id[i] as usize];
+            if j != usize::MAX {
+                ids.push(self.p.id[j] as usize);
+            }
+            return Err(Error::Instability {
+                step: self.step,
+                particles: ids,
+                message: format!(
+                    "overlap {:.3} of the pair's diameter exceeds the limit {:.3}",
+                    d.max_overlap, self.guards.max_overlap
+                ),
+                cause: format!(
+                    "contacts too soft for the load (raise kn, or lower the pressure/height: \
+                     overlap ~ load/kn), or dt = {:.3e} too large against t_c = {:.3e}",
+                    self.dt,
+                    self.contact_time()
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    pub fn check_finite(&self) -> Result<()> {
+        let bad = self
+            .p
+            .x
+            .par_iter()
+            .zip(self.p.v.par_iter())
+            .zip(self.p.omega.par_iter())
+            .position_first(|((x, v), w)| {
+                !(x.iter().all(|c| c.is_finite())
+                    && v.iter().all(|c| c.is_finite())
+                    && w.iter().all(|c| c.is_finite()))
+            });
+        if let Some(i) = bad {
+            return Err(Error::Instability {
+                step: self.step,
+                particles: vec![self.p.id[i] as usize],
+                message: "a position or velocity became NaN or infinite".into(),
+                cause: format!(
+                    "dt = {:.3e} too large against the contact time t_c = {:.3e} \
+                     (keep dt <= t_c/10), or an extreme overlap",
+                    self.dt,
+                    self.contact_time()
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// Evaluate all forces and torques for the current positions and velocities.
+    pub fn compute_forces(&mut self) {
+        let dt = self.dt;
+        let want_vir = D::NEEDS_VIRIAL || self.want_virial;
+        let law = &self.law;
+        let dom = &self.domain;
+        let p = &self.p;
+        let nl = &mut self.nl;
+
+        // Phase 1: pair forces, per fixed chunk of pairs.
+        let stats: Vec<(f64, usize, M3, usize)> = nl
+            .pair_i
+            .par_chunks(PAIR_CHUNK)
+            .zip(nl.pair_j.par_chunks(PAIR_CHUNK))
+            .zip(nl.hist.par_chunks_mut(PAIR_CHUNK.max(1)))
+            .zip(self.pair_out.par_chunks_mut(PAIR_CHUNK))
+            .enumerate()
+            .map(|(ci, (((pi, pj), hist), out))| {
+                let mut max_ov = 0.0f64;
+                let mut at = 0usize;
+                let mut vir = M3::zeros();
+                let mut nc = 0usize;
+                for k in 0..pi.len() {
+                    let i = pi[k] as usize;
+                    let j = pj[k] as usize;
+                    let d = dom.delta(&p.x[i], &p.x[j]);
+                    let r2 = d.norm_squared();
+                    let (ri, rj) = (p.radius[i], p.radius[j]);
+                    let rs = ri + rj;
+                    if r2 >= rs * rs {
+                        if T::FRICTIONAL {
+                            hist[k] = T::History::default();
+                        }
+                        out[k] = PairOut::default();
+                        continue;
+                    }
+                    nc += 1;
+                    let r = r2.sqrt();
+                    let n = d / r;
+                    let delta = rs - r;
+                    let (mi, mj) = (p.mass[i], p.mass[j]);
+                    let meff = mi * mj / (mi + mj);
+                    let vrel = p.v[i] - p.v[j] - (ri * p.omega[i] + rj * p.omega[j]).cross(&n);
+                    let pf = law.eval(&n, delta, rs, meff, &vrel, &mut hist[k], dt);
+                    out[k] = PairOut {
+                        f: pf.f,
+                        q: -n.cross(&pf.ft),
+                    };
+                    let ov = delta / rs;
+                    if ov > max_ov {
+                        max_ov = ov;
+                        at = ci * PAIR_CHUNK + k;
+                    }
+                    if want_vir {
+                        vir += d * pf.f.transpose();
+                    }
+                }
+                (max_ov, at, vir, nc)
+            })
+            .collect();
+
+        let mut diag = StepDiag::default();
+        for (ov, at, vir, nc) in &stats {
+            if *ov > diag.max_overlap {
+                diag.max_overlap = *ov;
+                diag.max_overlap_at = (nl.pair_i[*at] as usize, nl.pair_j[*at] as usize);
+            }
+            diag.virial += vir;
+            diag.contacts += nc;
+        }
+
+        // Phase 2: gather per particle in list order; walls and gravity.
+        let pair_out = &self.pair_out;
+        let own_start = &nl.own_start;
+        let rev_start = &nl.rev_start;
+        let rev_k = &nl.rev_k;
+        let g = self.body.g();
+        let walls = &self.walls;
+        let planes = walls.planes();
+        let wlaw = walls.law();
+        let x = &self.p.x;
+        let v = &self.p.v;
+        let om = &self.p.omega;
+        let rad = &self.p.radius;
+        let mass = &self.p.mass;
+        let body = |ci: usize,
+                    fo: &mut [V3],
+                    to: &mut [V3],
+                    mut wh: Option<&mut [[T::History; MAX_WALLS]]>| {
+                let mut wf = [V3::zeros(); MAX_WALLS];
+                let mut wmax = 0.0f64;
+                let mut wat = 0usize;
+                let base = ci * PART_CHUNK;
+                for l in 0..fo.len() {
+                    let i = base + l;
+                    let mut f = V3::zeros();
+                    let mut q = V3::zeros();
+                    for k in own_start[i]..own_start[i + 1] {
+                        let o = &pair_out[k as usize];
+                        f += o.f;
+                        q += o.q;
+                    }
+                    for r in rev_start[i]..rev_start[i + 1] {
+                        let o = &pair_out[rev_k[r as usize] as usize];
+                        f -= o.f;
+                        q += o.q;
+                    }
+                    let mut t = rad[i] * q;
+                    if W::ON {
+                        let wl = wlaw.unwrap();
+                        let hs = &mut wh.as_mut().unwrap()[l];
+                        let ri = rad[i];
+                        for (w, pl) in planes.iter().enumerate() {
+                            let gap = pl.sign * (x[i][pl.axis] - pl.pos);
+                            if gap >= ri {
+                                if T::FRICTIONAL {
+                                    hs[w] = T::History::default();
+                                }
+                                continue;
+                            }
+                            let mut nrm = V3::zeros();
+                            nrm[pl.axis] = pl.sign;
+                            let delta = ri - gap;
+                            let vrel = v[i] - (ri * om[i]).cross(&nrm);
+                            let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
+                            f += pf.f;
+                            t += ri * -nrm.cross(&pf.ft);
+                            wf[w] -= pf.f;
+                            let ov = delta / (2.0 * ri);
+                            if ov > wmax {
+                                wmax = ov;
+                                wat = i;
+                            }
+                        }
+                    }
+                    if G::ON {
+                        f += mass[i] * g;
+                    }
+                    fo[l] = f;
+                    to[l] = t;
+                }
+                (wf, wmax, wat)
+        };
+        let wstats: Vec<([V3; MAX_WALLS], f64, usize)> = if W::ON {
+            self.p
+                .force
+                .par_chunks_mut(PART_CHUNK)
+                .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
+                .zip(self.wall_hist.par_chunks_mut(PART_CHUNK))
+                .enumerate()
+                .map(|(ci, ((fo, to), wh))| body(ci, fo, to, Some(wh)))
+                .collect()
+        } else {
+            self.p
+                .force
+                .par_chunks_mut(PART_CHUNK)
+                .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
+                .enumerate()
+                .map(|(ci, (fo, to))| body(ci, fo, to, None))
+                .collect()
+        };
+        if W::ON {
+            for (wf, wmax, wat) in &wstats {
+                for w in 0..MAX_WALLS {
+                    diag.wall_force[w] += wf[w];
+                }
+                if *wmax > diag.max_overlap {
+                    diag.max_overlap = *wmax;
+                    diag.max_overlap_at = (*wat, usize::MAX);
+                }
+            }
+        }
+        self.diag = diag;
+        self.forces_valid = true;
+    }
+}

@@ -1,0 +1,137 @@
+//! Structure-of-arrays particle state. Spheres: mass = rho pi d^3 / 6, moment of inertia
+//! I = m d^2 / 10 (solid sphere, 2/5 m R^2).
+
+use crate::error::{Error, Result};
+use crate::V3;
+
+#[derive(Clone, Debug, Default)]
+pub struct Particles {
+    pub x: Vec<V3>,
+    pub v: Vec<V3>,
+    pub omega: Vec<V3>,
+    pub force: Vec<V3>,
+    pub torque: Vec<V3>,
+    pub radius: Vec<f64>,
+    pub mass: Vec<f64>,
+    pub inv_mass: Vec<f64>,
+    pub inv_inertia: Vec<f64>,
+    /// Periodic image counters (how many times a particle crossed each periodic boundary), so
+    /// unwrapped trajectories and restarts stay exact.
+    pub image: Vec<[i32; 3]>,
+    /// The user's label of each particle (arrays are re-ordered internally for locality).
+    pub id: Vec<u32>,
+}
+
+impl Particles {
+    /// Build from diameters and a single density; positions given; velocities and spins zero
+    /// unless set afterwards.
+    pub fn new(x: Vec<V3>, diameter: &[f64], density: f64) -> Result<Self> {
+        let n = x.len();
+        if n == 0 {
+            return Err(Error::param("particles", 0, "at least 1 particle"));
+        }
+        if diameter.len() != n {
+            return Err(Error::param(
+                "diameter",
+                format!("{} values", diameter.len()),
+                format!("one per particle ({n})"),
+            ));
+        }
+        crate::error::check_positive("density", density)?;
+        let mut p = Particles {
+            x,
+            v: vec![V3::zeros(); n],
+            omega: vec![V3::zeros(); n],
+            force: vec![V3::zeros(); n],
+            torque: vec![V3::zeros(); n],
+            radius: Vec::with_capacity(n),
+            mass: Vec::with_capacity(n),
+            inv_mass: Vec::with_capacity(n),
+            inv_inertia: Vec::with_capacity(n),
+            image: vec![[0; 3]; n],
+            id: (0..n as u32).collect(),
+        };
+        for (i, &d) in diameter.iter().enumerate() {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(Error::param(
+                    format!("diameter[{i}]"),
+                    d,
+                    "a finite number > 0",
+                ));
+            }
+            let m = density * std::f64::consts::PI * d * d * d / 6.0;
+            p.radius.push(0.5 * d);
+            p.mass.push(m);
+            p.inv_mass.push(1.0 / m);
+            p.inv_inertia.push(10.0 / (m * d * d));
+        }
+        for (i, xi) in p.x.iter().enumerate() {
+            if !xi.iter().all(|c| c.is_finite()) {
+                return Err(Error::param(
+                    format!("position[{i}]"),
+                    format!("{:?}", xi.as_slice()),
+                    "finite coordinates",
+                ));
+            }
+        }
+        Ok(p)
+    }
+
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+    pub fn inertia(&self, i: usize) -> f64 {
+        1.0 / self.inv_inertia[i]
+    }
+    pub fn max_radius(&self) -> f64 {
+        self.radius.iter().cloned().fold(0.0, f64::max)
+    }
+    pub fn min_mass(&self) -> f64 {
+        self.mass.iter().cloned().fold(f64::INFINITY, f64::min)
+    }
+    pub fn total_volume(&self) -> f64 {
+        self.radius
+            .iter()
+            .map(|r| 4.0 / 3.0 * std::f64::consts::PI * r * r * r)
+            .sum()
+    }
+    /// Translational and rotational kinetic energy.
+    pub fn kinetic_energy(&self) -> (f64, f64) {
+        let mut et = 0.0;
+        let mut er = 0.0;
+        for i in 0..self.len() {
+            et += 0.5 * self.mass[i] * self.v[i].norm_squared();
+            er += 0.5 * self.omega[i].norm_squared() / self.inv_inertia[i];
+        }
+        (et, er)
+    }
+    pub fn momentum(&self) -> V3 {
+        let mut p = V3::zeros();
+        for i in 0..self.len() {
+            p += self.mass[i] * self.v[i];
+        }
+        p
+    }
+
+    /// Apply a permutation: new[k] = old[perm[k]].
+    pub fn permute(&mut self, perm: &[usize]) {
+        fn apply<T: Clone>(v: &mut Vec<T>, perm: &[usize]) {
+            let old = std::mem::take(v);
+            *v = perm.iter().map(|&k| old[k].clone()).collect();
+        }
+        apply(&mut self.x, perm);
+        apply(&mut self.v, perm);
+        apply(&mut self.omega, perm);
+        apply(&mut self.force, perm);
+        apply(&mut self.torque, perm);
+        apply(&mut self.radius, perm);
+        apply(&mut self.mass, perm);
+        apply(&mut self.inv_mass, perm);
+        apply(&mut self.inv_inertia, perm);
+        apply(&mut self.image, perm);
+        apply(&mut self.id, perm);
+    }
+}
