@@ -14,6 +14,15 @@ pub trait Domain: Clone + Send + Sync + 'static {
     const NAME: &'static str;
     /// Whether the integrator needs the contact virial sum_pairs r_ij (x) f_ij every step.
     const NEEDS_VIRIAL: bool = false;
+    /// Whether particle velocities are stored relative to a streaming (affine) field, as in the
+    /// Parrinello–Rahman cell (002 2.10a: dr/dt = p/m + L r). Contacts then add L r_ij to the
+    /// relative velocity.
+    const STREAMING: bool = false;
+    /// The streaming velocity difference L r_ij for a displacement r_ij (only if `STREAMING`).
+    #[inline(always)]
+    fn streaming_velocity(&self, _rij: &V3) -> V3 {
+        V3::zeros()
+    }
     fn periodic(&self) -> [bool; 3];
     /// Minimum-image displacement x_i - x_j.
     fn delta(&self, xi: &V3, xj: &V3) -> V3;

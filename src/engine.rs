@@ -430,7 +430,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     let delta = rs - r;
                     let (mi, mj) = (p.mass[i], p.mass[j]);
                     let meff = mi * mj / (mi + mj);
-                    let vrel = p.v[i] - p.v[j] - (ri * p.omega[i] + rj * p.omega[j]).cross(&n);
+                    let mut vrel =
+                        p.v[i] - p.v[j] - (ri * p.omega[i] + rj * p.omega[j]).cross(&n);
+                    if D::STREAMING {
+                        vrel += dom.streaming_velocity(&d);
+                    }
                     let pf = law.eval(&n, delta, rs, meff, &vrel, &mut hist[k], dt);
                     out[k] = PairOut {
                         f: pf.f,
