@@ -125,6 +125,10 @@ pub trait Form: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
     const NAME: &'static str;
     /// (spring factor s, dashpot factor s_d) for overlap delta and pair mean diameter d.
     fn factors(delta: f64, d: f64, tsuji: bool) -> (f64, f64);
+    /// Dimensionless damping zeta = c / sqrt(kn m_eff) that gives restitution e_n.
+    fn zeta(e_n: f64) -> f64 {
+        LawParams::zeta(e_n)
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -150,6 +154,60 @@ impl Form for Hertz {
         let s = (delta / d).sqrt();
         (s, if tsuji { s.sqrt() } else { s })
     }
+    /// With the (delta/d)^(1/4) dashpot, the collision in reduced units y = delta/L,
+    /// tau = t/T obeys y'' = -y^(3/2) - zeta y^(1/4) y' whatever the impact speed, so
+    /// e_n = g(zeta) is universal; g is inverted numerically (RK4 + bisection, ~10 ms, once).
+    fn zeta(e_n: f64) -> f64 {
+        hertz_zeta(e_n)
+    }
+}
+
+/// Restitution of the reduced Hertz–Tsuji collision for damping zeta.
+pub fn hertz_restitution(zeta: f64) -> f64 {
+    let acc = |y: f64, v: f64| -> f64 {
+        let yp = y.max(0.0);
+        -yp * yp.sqrt() - zeta * yp.sqrt().sqrt() * v
+    };
+    let (mut y, mut v) = (0.0f64, 1.0f64);
+    let h = 2e-4;
+    for _ in 0..200_000 {
+        let (k1y, k1v) = (v, acc(y, v));
+        let (k2y, k2v) = (v + 0.5 * h * k1v, acc(y + 0.5 * h * k1y, v + 0.5 * h * k1v));
+        let (k3y, k3v) = (v + 0.5 * h * k2v, acc(y + 0.5 * h * k2y, v + 0.5 * h * k2v));
+        let (k4y, k4v) = (v + h * k3v, acc(y + h * k3y, v + h * k3v));
+        let yn = y + h / 6.0 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y);
+        let vn = v + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+        if yn <= 0.0 && y > 0.0 {
+            // interpolate the exit velocity linearly within the step
+            let f = y / (y - yn);
+            return -(v + f * (vn - v));
+        }
+        y = yn;
+        v = vn;
+        if v <= 0.0 && y <= 0.0 {
+            return 0.0;
+        }
+    }
+    0.0
+}
+
+fn hertz_zeta(e_n: f64) -> f64 {
+    if e_n >= 1.0 {
+        return 0.0;
+    }
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    while hertz_restitution(hi) > e_n && hi < 1e3 {
+        hi *= 2.0;
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if hertz_restitution(mid) > e_n {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
 }
 
 /// Tangential part of the law.
@@ -277,7 +335,7 @@ impl<F: Form, T: Friction> Law<F, T> {
     pub fn new(params: LawParams) -> Result<Self> {
         params.validate("")?;
         let (alpha, beta, tsuji) = match params.damping {
-            Damping::Restitution(e) => (0.0, LawParams::zeta(e) * params.kn.sqrt(), true),
+            Damping::Restitution(e) => (0.0, F::zeta(e) * params.kn.sqrt(), true),
             Damping::Rate(x) => (x, 0.0, false),
         };
         Ok(Law {

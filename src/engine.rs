@@ -63,7 +63,11 @@ pub struct PlaneWalls<F: Form, T: Friction> {
 impl<F: Form, T: Friction> PlaneWalls<F, T> {
     pub fn new(planes: Vec<Plane>, params: LawParams) -> Result<Self> {
         if planes.len() > MAX_WALLS {
-            return Err(Error::param("walls", planes.len(), format!("at most {MAX_WALLS}")));
+            return Err(Error::param(
+                "walls",
+                planes.len(),
+                format!("at most {MAX_WALLS}"),
+            ));
         }
         params.validate("wall_")?;
         Ok(PlaneWalls {
@@ -105,8 +109,8 @@ impl Body for Gravity {
     }
 }
 
-/// Per-pair result of the force loop: force on i, and q = -(n x F_t) so that the torques are
-/// R_i q on i and R_j q on j.
+/// Per-pair result of the force loop: force on i, and q = -(r/(R_i+R_j)) n x F_t so that the
+/// torques are R_i q on i and R_j q on j.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PairOut {
     pub f: V3,
@@ -199,11 +203,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     return Err(Error::param("dt", dt, "a finite number > 0"));
                 }
                 if dt > tc / 10.0 {
-                    return Err(Error::param("dt", dt, format!("<= t_c/10 = {:.4e}", tc / 10.0))
-                        .with_hint(format!(
+                    return Err(
+                        Error::param("dt", dt, format!("<= t_c/10 = {:.4e}", tc / 10.0)).with_hint(
+                            format!(
                             "t_c = {tc:.4e} is the contact time of the stiffest, lightest pair; \
                              the default dt is t_c/50"
-                        )));
+                        ),
+                        ),
+                    );
                 }
                 dt
             }
@@ -295,6 +302,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Make sure forces correspond to the current state (needed before the first step).
     pub fn ensure_forces(&mut self) -> Result<()> {
         if !self.forces_valid {
+            // velocities are full-step here: the dashpot's prediction must add nothing
+            self.p.force.iter_mut().for_each(|f| *f = V3::zeros());
+            self.p.torque.iter_mut().for_each(|t| *t = V3::zeros());
             self.wrap_all();
             if self.nl.needs_rebuild(&self.p, &self.domain) {
                 self.rebuild();
@@ -318,8 +328,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let dt = self.dt;
         self.domain.integrate_initial(&mut self.p, dt);
         self.wrap_all();
-        if self.nl.needs_rebuild(&self.p, &self.domain) || self.domain.rebuild_due(self.nl.skin)
-        {
+        if self.nl.needs_rebuild(&self.p, &self.domain) || self.domain.rebuild_due(self.nl.skin) {
             self.rebuild();
         }
         self.compute_forces();
@@ -391,6 +400,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Evaluate all forces and torques for the current positions and velocities.
     pub fn compute_forces(&mut self) {
         let dt = self.dt;
+        let hdt = 0.5 * dt;
         let want_vir = D::NEEDS_VIRIAL || self.want_virial;
         let law = &self.law;
         let dom = &self.domain;
@@ -430,15 +440,26 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     let delta = rs - r;
                     let (mi, mj) = (p.mass[i], p.mass[j]);
                     let meff = mi * mj / (mi + mj);
-                    let mut vrel =
-                        p.v[i] - p.v[j] - (ri * p.omega[i] + rj * p.omega[j]).cross(&n);
+                    // Lever arms l_i = r R_i/(R_i+R_j), l_j = r R_j/(R_i+R_j): the contact
+                    // point lies on the branch vector and l_i + l_j = r, which makes the pair
+                    // torques conserve total angular momentum; for equal spheres this is
+                    // exactly 002 (2.18b), (w_i + w_j) x r_ij / 2.
+                    let arm = r / rs;
+                    // Velocities predicted to the end of the step, v(n+1/2) + dt/2 a(n):
+                    // the dashpot then sees v(n+1) to O(dt^2) instead of the half-step velocity
+                    // (which makes the restitution of plain velocity Verlet off by O(dt)).
+                    let vi = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
+                    let vj = p.v[j] + (hdt * p.inv_mass[j]) * p.force[j];
+                    let wi = p.omega[i] + (hdt * p.inv_inertia[i]) * p.torque[i];
+                    let wj = p.omega[j] + (hdt * p.inv_inertia[j]) * p.torque[j];
+                    let mut vrel = vi - vj - (arm * (ri * wi + rj * wj)).cross(&n);
                     if D::STREAMING {
                         vrel += dom.streaming_velocity(&d);
                     }
                     let pf = law.eval(&n, delta, rs, meff, &vrel, &mut hist[k], dt);
                     out[k] = PairOut {
                         f: pf.f,
-                        q: -n.cross(&pf.ft),
+                        q: -arm * n.cross(&pf.ft),
                     };
                     let ov = delta / rs;
                     if ov > max_ov {
@@ -477,63 +498,68 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let om = &self.p.omega;
         let rad = &self.p.radius;
         let mass = &self.p.mass;
+        let p_inv_mass = &self.p.inv_mass;
+        let p_inv_inertia = &self.p.inv_inertia;
         let body = |ci: usize,
                     fo: &mut [V3],
                     to: &mut [V3],
                     mut wh: Option<&mut [[T::History; MAX_WALLS]]>| {
-                let mut wf = [V3::zeros(); MAX_WALLS];
-                let mut wmax = 0.0f64;
-                let mut wat = 0usize;
-                let base = ci * PART_CHUNK;
-                for l in 0..fo.len() {
-                    let i = base + l;
-                    let mut f = V3::zeros();
-                    let mut q = V3::zeros();
-                    for k in own_start[i]..own_start[i + 1] {
-                        let o = &pair_out[k as usize];
-                        f += o.f;
-                        q += o.q;
-                    }
-                    for r in rev_start[i]..rev_start[i + 1] {
-                        let o = &pair_out[rev_k[r as usize] as usize];
-                        f -= o.f;
-                        q += o.q;
-                    }
-                    let mut t = rad[i] * q;
-                    if W::ON {
-                        let wl = wlaw.unwrap();
-                        let hs = &mut wh.as_mut().unwrap()[l];
-                        let ri = rad[i];
-                        for (w, pl) in planes.iter().enumerate() {
-                            let gap = pl.sign * (x[i][pl.axis] - pl.pos);
-                            if gap >= ri {
-                                if T::FRICTIONAL {
-                                    hs[w] = T::History::default();
-                                }
-                                continue;
+            let mut wf = [V3::zeros(); MAX_WALLS];
+            let mut wmax = 0.0f64;
+            let mut wat = 0usize;
+            let base = ci * PART_CHUNK;
+            for l in 0..fo.len() {
+                let i = base + l;
+                let mut f = V3::zeros();
+                let mut q = V3::zeros();
+                for k in own_start[i]..own_start[i + 1] {
+                    let o = &pair_out[k as usize];
+                    f += o.f;
+                    q += o.q;
+                }
+                for r in rev_start[i]..rev_start[i + 1] {
+                    let o = &pair_out[rev_k[r as usize] as usize];
+                    f -= o.f;
+                    q += o.q;
+                }
+                let mut t = rad[i] * q;
+                if W::ON {
+                    let wl = wlaw.unwrap();
+                    let hs = &mut wh.as_mut().unwrap()[l];
+                    let ri = rad[i];
+                    for (w, pl) in planes.iter().enumerate() {
+                        let gap = pl.sign * (x[i][pl.axis] - pl.pos);
+                        if gap >= ri {
+                            if T::FRICTIONAL {
+                                hs[w] = T::History::default();
                             }
-                            let mut nrm = V3::zeros();
-                            nrm[pl.axis] = pl.sign;
-                            let delta = ri - gap;
-                            let vrel = v[i] - (ri * om[i]).cross(&nrm);
-                            let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
-                            f += pf.f;
-                            t += ri * -nrm.cross(&pf.ft);
-                            wf[w] -= pf.f;
-                            let ov = delta / (2.0 * ri);
-                            if ov > wmax {
-                                wmax = ov;
-                                wat = i;
-                            }
+                            continue;
+                        }
+                        let mut nrm = V3::zeros();
+                        nrm[pl.axis] = pl.sign;
+                        let delta = ri - gap;
+                        // contact point on the plane: lever arm = gap
+                        let vi = v[i] + (hdt * p_inv_mass[i]) * fo[l];
+                        let wi = om[i] + (hdt * p_inv_inertia[i]) * to[l];
+                        let vrel = vi - (gap * wi).cross(&nrm);
+                        let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
+                        f += pf.f;
+                        t -= gap * nrm.cross(&pf.ft);
+                        wf[w] -= pf.f;
+                        let ov = delta / (2.0 * ri);
+                        if ov > wmax {
+                            wmax = ov;
+                            wat = i;
                         }
                     }
-                    if G::ON {
-                        f += mass[i] * g;
-                    }
-                    fo[l] = f;
-                    to[l] = t;
                 }
-                (wf, wmax, wat)
+                if G::ON {
+                    f += mass[i] * g;
+                }
+                fo[l] = f;
+                to[l] = t;
+            }
+            (wf, wmax, wat)
         };
         let wstats: Vec<([V3; MAX_WALLS], f64, usize)> = if W::ON {
             self.p

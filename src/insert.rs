@@ -23,7 +23,11 @@ impl SizeDist {
             SizeDist::Mono(d) => crate::error::check_positive("diameter", *d),
             SizeDist::Discrete(v) => {
                 if v.is_empty() {
-                    return Err(Error::param("sizes", "[]", "at least one (diameter, fraction)"));
+                    return Err(Error::param(
+                        "sizes",
+                        "[]",
+                        "at least one (diameter, fraction)",
+                    ));
                 }
                 let mut tot = 0.0;
                 for (d, f) in v {
@@ -34,14 +38,22 @@ impl SizeDist {
                     tot += f;
                 }
                 if (tot - 1.0).abs() > 1e-6 {
-                    return Err(Error::param("size fractions (sum)", tot, "fractions summing to 1"));
+                    return Err(Error::param(
+                        "size fractions (sum)",
+                        tot,
+                        "fractions summing to 1",
+                    ));
                 }
                 Ok(())
             }
             SizeDist::Uniform(lo, hi) => {
                 crate::error::check_positive("diameter min", *lo)?;
                 if !(hi.is_finite() && hi >= lo) {
-                    return Err(Error::param("diameter max", hi, format!(">= diameter min = {lo}")));
+                    return Err(Error::param(
+                        "diameter max",
+                        hi,
+                        format!(">= diameter min = {lo}"),
+                    ));
                 }
                 Ok(())
             }
@@ -83,8 +95,10 @@ impl SizeDist {
             SizeDist::Discrete(v) => {
                 let mean_vol: f64 = v.iter().map(|(d, f)| f * vol(*d)).sum();
                 let n = (vsolid / mean_vol).round().max(1.0) as usize;
-                let mut counts: Vec<usize> =
-                    v.iter().map(|(_, f)| (f * n as f64).floor() as usize).collect();
+                let mut counts: Vec<usize> = v
+                    .iter()
+                    .map(|(_, f)| (f * n as f64).floor() as usize)
+                    .collect();
                 let mut rem: Vec<(f64, usize)> = v
                     .iter()
                     .enumerate()
@@ -147,10 +161,17 @@ pub fn insert(
         crate::error::check_positive("region length", len[k])?;
     }
     let dmax = diameters.iter().cloned().fold(0.0, f64::max);
-    let nb: Vec<usize> = (0..3).map(|k| ((len[k] / dmax).floor() as usize).max(1)).collect();
+    let nb: Vec<usize> = (0..3)
+        .map(|k| ((len[k] / dmax).floor() as usize).max(1))
+        .collect();
     let mut grid: Vec<Vec<u32>> = vec![Vec::new(); nb[0] * nb[1] * nb[2]];
     let mut order: Vec<usize> = (0..diameters.len()).collect();
-    order.sort_by(|&a, &b| diameters[b].partial_cmp(&diameters[a]).unwrap().then(a.cmp(&b)));
+    order.sort_by(|&a, &b| {
+        diameters[b]
+            .partial_cmp(&diameters[a])
+            .unwrap()
+            .then(a.cmp(&b))
+    });
     let mut pos = vec![V3::zeros(); diameters.len()];
     let cell = |x: &V3| -> [usize; 3] {
         let mut c = [0; 3];
@@ -168,7 +189,10 @@ pub fn insert(
         }
         d
     };
-    let vsolid: f64 = diameters.iter().map(|d| std::f64::consts::PI * d.powi(3) / 6.0).sum();
+    let vsolid: f64 = diameters
+        .iter()
+        .map(|d| std::f64::consts::PI * d.powi(3) / 6.0)
+        .sum();
     let phi = vsolid / (len.x * len.y * len.z);
     for (placed, &i) in order.iter().enumerate() {
         let r = 0.5 * diameters[i];
