@@ -265,6 +265,22 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         };
         e.wrap_all();
         e.rebuild();
+        e.compute_forces();
+        if e.diag.max_overlap > e.guards.max_overlap {
+            let (i, j) = e.diag.max_overlap_at;
+            let who = if j == usize::MAX {
+                format!("particle {} and a wall", e.p.id[i])
+            } else {
+                format!("particles {} and {}", e.p.id[i], e.p.id[j])
+            };
+            return Err(Error::Configuration {
+                message: format!(
+                    "initial configuration: {who} overlap by {:.3} of their mean diameter, above \
+                     the allowed {:.3} (max_overlap); relax or re-generate the packing",
+                    e.diag.max_overlap, e.guards.max_overlap
+                ),
+            });
+        }
         Ok(e)
     }
 

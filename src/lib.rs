@@ -15,6 +15,7 @@ pub mod insert;
 pub mod neighbor;
 pub mod particles;
 pub mod rng;
+pub mod sim;
 pub mod table;
 
 pub use error::{Error, Result};

@@ -1,0 +1,240 @@
+//! `Sim`: a Python handle on any composed engine.
+
+use crate::arrow::ArrowBatch;
+use crate::errors::{param_err, IntoPy};
+use granflow::sim::Simulation;
+use granflow::V3;
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+#[pyclass(module = "granflow._core")]
+pub struct Sim {
+    pub inner: Box<dyn Simulation>,
+    pool: rayon::ThreadPool,
+    threads: usize,
+    pub scene: String,
+}
+
+fn make_pool(n: usize) -> PyResult<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .map_err(|e| param_err("threads", n, &format!("a buildable thread count ({e})")))
+}
+
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+}
+
+impl Sim {
+    pub fn new(inner: Box<dyn Simulation>, scene: &str) -> PyResult<Self> {
+        let threads = default_threads();
+        Ok(Sim {
+            inner,
+            pool: make_pool(threads)?,
+            threads,
+            scene: scene.to_string(),
+        })
+    }
+
+    /// Per-particle vectors in id order (the kernel re-orders particles for locality).
+    fn by_id<'py>(&self, py: Python<'py>, f: impl Fn(usize) -> V3) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        let n = p.len();
+        let mut out = vec![0.0; 3 * n];
+        for i in 0..n {
+            let k = p.id[i] as usize;
+            let v = f(i);
+            out[3 * k] = v.x;
+            out[3 * k + 1] = v.y;
+            out[3 * k + 2] = v.z;
+        }
+        PyArray1::from_vec(py, out).reshape([n, 3]).unwrap()
+    }
+
+    fn set_by_id(
+        &mut self,
+        name: &str,
+        arr: PyReadonlyArray2<'_, f64>,
+        set: impl Fn(&mut granflow::particles::Particles, usize, V3),
+    ) -> PyResult<()> {
+        let a = arr.as_array();
+        let n = self.inner.particles().len();
+        if a.shape() != [n, 3] {
+            return Err(param_err(
+                name,
+                format!("shape {:?}", a.shape()),
+                &format!("an array of shape ({n}, 3)"),
+            ));
+        }
+        if a.iter().any(|x| !x.is_finite()) {
+            return Err(param_err(name, "non-finite values", "finite numbers"));
+        }
+        let p = self.inner.particles_mut();
+        for i in 0..n {
+            let k = p.id[i] as usize;
+            set(p, i, V3::new(a[[k, 0]], a[[k, 1]], a[[k, 2]]));
+        }
+        self.inner.invalidate();
+        Ok(())
+    }
+}
+
+#[pymethods]
+impl Sim {
+    /// Advance `steps` steps with the GIL released. Python drives long runs in chunks
+    /// (progress, Ctrl-C between chunks).
+    fn run(&mut self, py: Python<'_>, steps: u64) -> PyResult<()> {
+        let inner = &mut self.inner;
+        let pool = &self.pool;
+        let r = py.detach(|| pool.install(|| inner.run(steps)));
+        r.py_err()
+    }
+
+    #[getter]
+    fn threads(&self) -> usize {
+        self.threads
+    }
+    #[setter]
+    fn set_threads(&mut self, n: usize) -> PyResult<()> {
+        if n == 0 || n > 1024 {
+            return Err(param_err("threads", n, "1 <= threads <= 1024"));
+        }
+        self.pool = make_pool(n)?;
+        self.threads = n;
+        Ok(())
+    }
+    #[getter]
+    fn scene(&self) -> String {
+        self.scene.clone()
+    }
+    #[getter]
+    fn n(&self) -> usize {
+        self.inner.particles().len()
+    }
+    #[getter]
+    fn step(&self) -> u64 {
+        self.inner.step()
+    }
+    #[getter]
+    fn time(&self) -> f64 {
+        self.inner.time()
+    }
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.inner.dt()
+    }
+    #[getter]
+    fn contact_time(&self) -> f64 {
+        self.inner.contact_time()
+    }
+    #[getter]
+    fn volume(&self) -> f64 {
+        self.inner.volume()
+    }
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        self.by_id(py, |i| p.x[i])
+    }
+    /// Unwrapped positions (periodic images added back).
+    fn unwrapped_positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        let (h, _) = self.inner.cell();
+        self.by_id(py, |i| {
+            let im = p.image[i];
+            p.x[i] + h * V3::new(im[0] as f64, im[1] as f64, im[2] as f64)
+        })
+    }
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        self.by_id(py, |i| p.v[i])
+    }
+    fn angular_velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        self.by_id(py, |i| p.omega[i])
+    }
+    fn forces<'py>(&mut self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        self.by_id(py, |i| p.force[i])
+    }
+    fn torques<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let p = self.inner.particles();
+        self.by_id(py, |i| p.torque[i])
+    }
+    fn diameters<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let p = self.inner.particles();
+        let mut out = vec![0.0; p.len()];
+        for i in 0..p.len() {
+            out[p.id[i] as usize] = 2.0 * p.radius[i];
+        }
+        PyArray1::from_vec(py, out)
+    }
+    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let p = self.inner.particles();
+        let mut out = vec![0.0; p.len()];
+        for i in 0..p.len() {
+            out[p.id[i] as usize] = p.mass[i];
+        }
+        PyArray1::from_vec(py, out)
+    }
+    fn set_velocities(&mut self, v: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        self.set_by_id("velocities", v, |p, i, x| p.v[i] = x)
+    }
+    fn set_angular_velocities(&mut self, w: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        self.set_by_id("angular_velocities", w, |p, i, x| p.omega[i] = x)
+    }
+    fn set_positions(&mut self, x: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        self.set_by_id("positions", x, |p, i, v| p.x[i] = v)
+    }
+    /// Compute forces for the current state without stepping (e.g. step-0 forces).
+    fn compute_forces(&mut self) -> PyResult<()> {
+        self.inner.run(0).py_err()
+    }
+    /// Kinetic energies (translational, rotational) and the elastic energy in the contacts.
+    fn energies(&self) -> (f64, f64, f64) {
+        let (a, b) = self.inner.particles().kinetic_energy();
+        (a, b, self.inner.elastic_energy())
+    }
+    /// What the last force evaluation saw.
+    fn diagnostics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = self.inner.diag();
+        let out = PyDict::new(py);
+        out.set_item("max_overlap", d.max_overlap)?;
+        out.set_item("contacts", d.contacts)?;
+        let wf: Vec<[f64; 3]> = d.wall_force.iter().map(|v| [v.x, v.y, v.z]).collect();
+        out.set_item("wall_force", wf)?;
+        let vir: Vec<f64> = d.virial.iter().cloned().collect();
+        out.set_item("virial_colmajor", vir)?;
+        Ok(out)
+    }
+    /// The parts this simulation is composed of.
+    fn components(&self) -> Vec<String> {
+        self.inner.components()
+    }
+    /// Bytes held by each part.
+    fn memory(&self) -> Vec<(String, usize)> {
+        self.inner.memory()
+    }
+    /// Cell matrix (rows x, y, z; columns = cell vectors) and origin.
+    fn cell(&self) -> ([[f64; 3]; 3], [f64; 3]) {
+        let (h, o) = self.inner.cell();
+        let mut m = [[0.0; 3]; 3];
+        for (r, row) in m.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v = h[(r, c)];
+            }
+        }
+        (m, [o.x, o.y, o.z])
+    }
+    /// Sample tables produced since the last call.
+    fn take_tables(&mut self) -> Vec<ArrowBatch> {
+        self.inner
+            .take_tables()
+            .into_iter()
+            .map(|(name, t)| ArrowBatch::from_table(&name, &t))
+            .collect()
+    }
+}

@@ -1,0 +1,290 @@
+"""The Python face of a simulation: build from particles, a box and a contact law; run; read
+state as numpy arrays; take sample tables as pyarrow tables.
+
+Everything heavy happens in the Rust kernel with the GIL released. ``run`` advances in chunks of
+about a quarter of a second so that a progress bar can update and Ctrl-C stops cleanly between
+steps, leaving the simulation usable.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import pyarrow as pa
+
+from granflow import _core
+from granflow._progress import Progress
+from granflow.errors import ParameterError
+from granflow.sizes import SizeDist
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """Spring–dashpot law with tangential history and Coulomb friction.
+
+    000 App. A (A1–A3), 002 §2.4 (2.17–2.19). ``form`` is 'hooke' (a = 0) or 'hertz' (a = 1/2).
+    Damping: give ``e_n`` (restitution, the damping is derived per pair) or ``xi_n`` (rate, as
+    LAMMPS ``gamma_n``), not both. ``kt`` defaults to 2/7 kn, ``xi_t_ratio`` to 1/2. With
+    ``mu = 0`` the law carries no tangential history at all.
+    """
+
+    kn: float = 1e6
+    e_n: float | None = 0.82
+    mu: float = 0.5
+    kt: float | None = None
+    xi_n: float | None = None
+    xi_t_ratio: float = 0.5
+    form: str = "hooke"
+
+    def as_dict(self) -> dict[str, float]:
+        d: dict[str, float] = {"kn": self.kn, "mu": self.mu, "xi_t_ratio": self.xi_t_ratio}
+        if self.kt is not None:
+            d["kt"] = self.kt
+        if self.xi_n is not None:
+            if self.e_n is not None and self.e_n != ContactLaw.e_n:
+                raise ParameterError("invalid e_n/xi_n: give exactly one of e_n or xi_n")
+            d["xi_n"] = self.xi_n
+        elif self.e_n is not None:
+            d["e_n"] = self.e_n
+        return d
+
+
+@dataclass(frozen=True)
+class Box:
+    """Orthogonal box [lo, lo + length) with a periodic flag per axis."""
+
+    length: tuple[float, float, float]
+    lo: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    periodic: tuple[bool, bool, bool] = (True, True, True)
+
+    @property
+    def volume(self) -> float:
+        return float(np.prod(self.length))
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A flat wall: the plane x[axis] = position; particles live on the side ``sign`` (+1/-1)."""
+
+    axis: int
+    position: float
+    sign: float = 1.0
+
+
+@dataclass
+class Simulation:
+    """A DEM simulation in an orthogonal box (see ``granflow.scenes`` for the papers' scenes).
+
+    Parameters are validated by the kernel; errors are :class:`granflow.ParameterError` naming
+    the parameter and its allowed range.
+    """
+
+    positions: np.ndarray
+    diameters: np.ndarray
+    box: Box
+    law: ContactLaw = field(default_factory=ContactLaw)
+    density: float = 1.0
+    velocities: np.ndarray | None = None
+    angular_velocities: np.ndarray | None = None
+    walls: Sequence[Wall] = ()
+    wall_law: ContactLaw | None = None
+    gravity: tuple[float, float, float] | None = None
+    dt: float | None = None
+    skin: float = 0.3
+    threads: int | None = None
+    _sim: _core.Sim = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        x = np.ascontiguousarray(self.positions, dtype=np.float64)
+        d = np.ascontiguousarray(self.diameters, dtype=np.float64)
+        if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] == 0:
+            raise ParameterError(
+                f"invalid positions: shape {x.shape}: allowed an (N, 3) array with N >= 1"
+            )
+        if d.shape != (x.shape[0],):
+            raise ParameterError(
+                f"invalid diameters: shape {d.shape}: allowed one per particle ({x.shape[0]},)"
+            )
+        if self.law.form not in ("hooke", "hertz"):
+            raise ParameterError(f"invalid form = {self.law.form!r}: allowed 'hooke' or 'hertz'")
+        self._sim = _core.box_sim(
+            x,
+            d,
+            float(self.density),
+            tuple(map(float, self.box.lo)),
+            tuple(map(float, self.box.length)),
+            tuple(map(bool, self.box.periodic)),
+            self.law.form,
+            self.law.as_dict(),
+            walls=[(w.axis, float(w.position), float(w.sign)) for w in self.walls] or None,
+            wall_law=self.wall_law.as_dict() if self.wall_law else None,
+            gravity=tuple(map(float, self.gravity)) if self.gravity is not None else None,
+            dt=self.dt,
+            skin=float(self.skin),
+            v=None if self.velocities is None else np.ascontiguousarray(self.velocities, float),
+            omega=None
+            if self.angular_velocities is None
+            else np.ascontiguousarray(self.angular_velocities, float),
+        )
+        if self.threads is not None:
+            self._sim.threads = int(self.threads)
+        self.wall_seconds = 0.0
+
+    # -- running -------------------------------------------------------------------------
+    def run(self, steps: int, progress: bool | None = None) -> None:
+        """Advance ``steps`` steps. Ctrl-C stops between steps (the state stays consistent and
+        usable) and re-raises ``KeyboardInterrupt``."""
+        run_chunked(self._sim, steps, progress, self)
+
+    # -- state ---------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return self._sim.n
+
+    @property
+    def step(self) -> int:
+        return self._sim.step
+
+    @property
+    def time(self) -> float:
+        return self._sim.time
+
+    @property
+    def timestep(self) -> float:
+        return self._sim.dt
+
+    @property
+    def contact_time(self) -> float:
+        """Contact duration t_c of the stiffest, lightest pair (linear law)."""
+        return self._sim.contact_time
+
+    def set_threads(self, n: int) -> None:
+        self._sim.threads = int(n)
+
+    def get_positions(self) -> np.ndarray:
+        return self._sim.positions()
+
+    def get_velocities(self) -> np.ndarray:
+        return self._sim.velocities()
+
+    def get_angular_velocities(self) -> np.ndarray:
+        return self._sim.angular_velocities()
+
+    def get_forces(self) -> np.ndarray:
+        return self._sim.forces()
+
+    def get_torques(self) -> np.ndarray:
+        return self._sim.torques()
+
+    def set_velocities(self, v: np.ndarray) -> None:
+        self._sim.set_velocities(np.ascontiguousarray(v, dtype=np.float64))
+
+    def set_angular_velocities(self, w: np.ndarray) -> None:
+        self._sim.set_angular_velocities(np.ascontiguousarray(w, dtype=np.float64))
+
+    def energies(self) -> dict[str, float]:
+        et, er, ee = self._sim.energies()
+        return {"kinetic_translational": et, "kinetic_rotational": er, "elastic": ee}
+
+    def components(self) -> list[str]:
+        """The parts this simulation is composed of (what its step executes)."""
+        return self._sim.components()
+
+    def memory(self) -> dict[str, int]:
+        """Bytes held by each part."""
+        return dict(self._sim.memory())
+
+    def diagnostics(self) -> dict:
+        return self._sim.diagnostics()
+
+    def parameters(self) -> dict:
+        return {
+            "law": asdict(self.law),
+            "wall_law": asdict(self.wall_law) if self.wall_law else None,
+            "box": asdict(self.box),
+            "density": self.density,
+            "gravity": self.gravity,
+            "dt": self.timestep,
+            "skin": self.skin,
+            "n": self.n,
+        }
+
+
+def run_chunked(sim: _core.Sim, steps: int, progress: bool | None, owner: object = None) -> None:
+    """Run ``steps`` steps in chunks of ~0.25 s (progress bar, Ctrl-C between chunks)."""
+    steps = int(steps)
+    if steps < 0:
+        raise ParameterError(f"invalid steps = {steps}: allowed >= 0")
+    if steps == 0:
+        sim.compute_forces()
+        return
+    bar = Progress(steps, sim.n, sim.dt, enabled=progress)
+    done = 0
+    chunk = max(1, min(steps, 10))
+    t_start = time.perf_counter()
+    try:
+        while done < steps:
+            c = min(chunk, steps - done)
+            t0 = time.perf_counter()
+            sim.run(c)
+            el = time.perf_counter() - t0
+            done += c
+            bar.update(done, sim.time)
+            # aim for ~0.25 s per chunk
+            if el > 0:
+                chunk = int(min(max(1, c * 0.25 / el), 2 * c + 1, 1_000_000))
+    finally:
+        bar.close()
+        if owner is not None:
+            owner.wall_seconds = getattr(owner, "wall_seconds", 0.0) + (
+                time.perf_counter() - t_start
+            )
+
+
+def to_table(batch: _core.ArrowBatch) -> pa.Table:
+    """Import a kernel batch through the Arrow C data interface (no copy of the buffers)."""
+    rb = pa.record_batch(batch)
+    return pa.Table.from_batches([rb])
+
+
+def random_packing(
+    sizes: SizeDist,
+    box: Box,
+    phi: float,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Non-overlapping random spheres filling ``box`` to volume fraction ``phi`` (random
+    sequential addition; jams near phi ~ 0.38). Returns (positions, diameters)."""
+    if not (0 < phi < 0.45):
+        raise ParameterError(
+            f"invalid phi = {phi}: allowed 0 < phi < 0.45 for random insertion "
+            "(denser states: compress, or use a scene's preparation)"
+        )
+    d = sizes.diameters_for_volume(phi * box.volume, seed)
+    lo = np.asarray(box.lo, float)
+    hi = lo + np.asarray(box.length, float)
+    x = _core.insert_spheres(d, tuple(lo), tuple(hi), tuple(box.periodic), int(seed))
+    return np.asarray(x), d
+
+
+def maxwell_velocities(n: int, scale: float, seed: int = 0) -> np.ndarray:
+    """Gaussian velocities with zero total momentum (equal-mass approximation)."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(0.0, scale, size=(n, 3))
+    return v - v.mean(axis=0)
+
+
+__all__ = [
+    "Box",
+    "ContactLaw",
+    "Simulation",
+    "Wall",
+    "maxwell_velocities",
+    "random_packing",
+    "run_chunked",
+    "to_table",
+]
+
