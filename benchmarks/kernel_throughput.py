@@ -16,9 +16,8 @@ import resource
 import time
 from pathlib import Path
 
-import numpy as np
-
 import granflow as gf
+import numpy as np
 from granflow.packing import dense_periodic_packing
 
 OUT = Path(__file__).parent / "out"

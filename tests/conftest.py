@@ -1,7 +1,6 @@
+import granflow as gf
 import numpy as np
 import pytest
-
-import granflow as gf
 
 
 @pytest.fixture

@@ -3,11 +3,10 @@
 import signal
 import threading
 
+import granflow as gf
 import numpy as np
 import pyarrow as pa
 import pytest
-
-import granflow as gf
 
 
 def test_create_run_and_read_arrays(gas, make_sim):
