@@ -53,6 +53,13 @@ pub trait Domain: Clone + Send + Sync + 'static {
     }
     /// Called after every neighbour-list rebuild.
     fn on_rebuild(&mut self) {}
+    /// Dynamic state for checkpoints (a static box has none).
+    fn save_state(&self) -> Vec<f64> {
+        Vec::new()
+    }
+    fn load_state(&mut self, _s: &[f64]) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// Velocity Verlet, first half (translation and rotation of spheres).

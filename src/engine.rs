@@ -309,6 +309,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.pair_out.resize(self.nl.len(), PairOut::default());
     }
 
+    /// Forces in `p` correspond to the state (after loading a checkpoint).
+    pub fn mark_forces_valid(&mut self) {
+        self.forces_valid = true;
+    }
+
     /// Mark the state as changed from outside (positions or velocities set by the user).
     pub fn invalidate(&mut self) {
         self.nl.valid = false;

@@ -7,6 +7,7 @@
 //! frictional or not), its domain (periodic box, channel walls, triclinic cell) and its body force,
 //! so a scene carries and executes only the parts it uses.
 
+pub mod checkpoint;
 pub mod contact;
 pub mod domain;
 pub mod engine;

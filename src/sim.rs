@@ -33,6 +33,11 @@ pub trait Simulation: Send + Sync {
     fn volume(&self) -> f64;
     /// Cell matrix (columns = cell vectors) and origin.
     fn cell(&self) -> (crate::M3, crate::V3);
+    /// Write the complete dynamic state (see `checkpoint`).
+    fn save_checkpoint(&self, w: &mut crate::checkpoint::Writer);
+    /// Restore a state written by `save_checkpoint` from a simulation built with the same
+    /// parameters.
+    fn load_checkpoint(&mut self, r: &crate::checkpoint::Reader) -> Result<()>;
     /// Total elastic energy stored in the contacts (linear law: kn delta^2/2; Hertz:
     /// 2/5 kn delta^(5/2)/sqrt(d)); used for energy balances.
     fn elastic_energy(&self) -> f64;
@@ -63,11 +68,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             format!("contact: {}", crate::contact::Law::<F, T>::name()),
             format!(
                 "tangential history: {}",
-                if T::FRICTIONAL {
-                    "per contact"
-                } else {
-                    "none"
-                }
+                if T::FRICTIONAL { "per contact" } else { "none" }
             ),
             format!("domain: {}", D::NAME),
             "integrator: velocity Verlet (translation + rotation)".to_string(),
@@ -185,5 +186,163 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     }
     fn elastic_energy(&self) -> f64 {
         self.elastic_energy_sum()
+    }
+    fn save_checkpoint(&self, w: &mut crate::checkpoint::Writer) {
+        self.save_state(w)
+    }
+    fn load_checkpoint(&mut self, r: &crate::checkpoint::Reader) -> Result<()> {
+        self.load_state(r)
+    }
+}
+
+use crate::checkpoint::{flat_v3, unflat_v3, Reader, Writer};
+
+impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W, G> {
+    /// Everything needed to continue bitwise identically: internal particle order, the pair
+    /// list as built (rebuild timing depends on x_build), histories, last forces.
+    pub fn save_state(&self, w: &mut Writer) {
+        let p = &self.p;
+        w.text("engine.kind", &self.kind_string());
+        w.u64s("engine.step", &[self.step]);
+        w.f64s("engine.time", &[self.time, self.dt]);
+        w.f64s("p.x", &flat_v3(&p.x));
+        w.f64s("p.v", &flat_v3(&p.v));
+        w.f64s("p.omega", &flat_v3(&p.omega));
+        w.f64s("p.force", &flat_v3(&p.force));
+        w.f64s("p.torque", &flat_v3(&p.torque));
+        w.f64s("p.radius", &p.radius);
+        w.i32s(
+            "p.image",
+            &p.image.iter().flatten().cloned().collect::<Vec<_>>(),
+        );
+        w.u32s("p.id", &p.id);
+        let nl = &self.nl;
+        w.u32s("nl.pair_i", &nl.pair_i);
+        w.u32s("nl.pair_j", &nl.pair_j);
+        w.u32s("nl.own_start", &nl.own_start);
+        w.u32s("nl.rev_start", &nl.rev_start);
+        w.u32s("nl.rev_k", &nl.rev_k);
+        w.f64s("nl.x_build", &flat_v3(&nl.x_build));
+        w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
+        if T::FRICTIONAL {
+            let h: Vec<f64> = nl.hist.iter().flat_map(T::to_array).collect();
+            w.f64s("nl.hist", &h);
+            let wh: Vec<f64> = self
+                .wall_hist
+                .iter()
+                .flat_map(|a| a.iter().flat_map(T::to_array).collect::<Vec<_>>())
+                .collect();
+            w.f64s("walls.hist", &wh);
+        }
+        let po: Vec<f64> = self
+            .pair_out
+            .iter()
+            .flat_map(|o| [o.f.x, o.f.y, o.f.z, o.q.x, o.q.y, o.q.z])
+            .collect();
+        w.f64s("pair_out", &po);
+        w.f64s("domain", &self.domain.save_state());
+    }
+
+    fn kind_string(&self) -> String {
+        format!(
+            "{}|{}|walls={}|gravity={}",
+            crate::contact::Law::<F, T>::name(),
+            D::NAME,
+            W::ON,
+            G::ON
+        )
+    }
+
+    pub fn load_state(&mut self, r: &Reader) -> Result<()> {
+        let bad = |m: String| crate::error::Error::Io {
+            message: format!("checkpoint: {m}"),
+        };
+        let kind = r.text("engine.kind")?;
+        if kind != self.kind_string() {
+            return Err(bad(format!(
+                "written by a '{kind}' simulation, this one is '{}'",
+                self.kind_string()
+            )));
+        }
+        let n = self.p.len();
+        let id = r.u32s("p.id")?;
+        if id.len() != n {
+            return Err(bad(format!(
+                "{} particles, this simulation has {n}",
+                id.len()
+            )));
+        }
+        // radii must match particle by particle (same parameters, same seed)
+        let radius = r.f64s("p.radius")?;
+        let mut mine = vec![0.0; n];
+        for i in 0..n {
+            mine[self.p.id[i] as usize] = self.p.radius[i];
+        }
+        for (k, &i) in id.iter().enumerate() {
+            if (i as usize) >= n || mine[i as usize] != radius[k] {
+                return Err(bad("particle sizes differ from this simulation's".into()));
+            }
+        }
+        // re-order our particles into the checkpoint's internal order
+        let mut where_id = vec![0usize; n];
+        for i in 0..n {
+            where_id[self.p.id[i] as usize] = i;
+        }
+        let perm: Vec<usize> = id.iter().map(|&k| where_id[k as usize]).collect();
+        self.p.permute(&perm);
+        self.p.x = unflat_v3(&r.f64s("p.x")?);
+        self.p.v = unflat_v3(&r.f64s("p.v")?);
+        self.p.omega = unflat_v3(&r.f64s("p.omega")?);
+        self.p.force = unflat_v3(&r.f64s("p.force")?);
+        self.p.torque = unflat_v3(&r.f64s("p.torque")?);
+        self.p.image = r
+            .i32s("p.image")?
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let nl = &mut self.nl;
+        nl.pair_i = r.u32s("nl.pair_i")?;
+        nl.pair_j = r.u32s("nl.pair_j")?;
+        nl.own_start = r.u32s("nl.own_start")?;
+        nl.rev_start = r.u32s("nl.rev_start")?;
+        nl.rev_k = r.u32s("nl.rev_k")?;
+        nl.x_build = unflat_v3(&r.f64s("nl.x_build")?);
+        let meta = r.u64s("nl.meta")?;
+        nl.builds = meta[0];
+        nl.valid = meta[1] != 0;
+        let np = nl.pair_i.len();
+        nl.hist = vec![T::History::default(); np];
+        if T::FRICTIONAL {
+            let h = r.f64s("nl.hist")?;
+            for (k, c) in h.chunks_exact(3).enumerate().take(np) {
+                nl.hist[k] = T::from_array([c[0], c[1], c[2]]);
+            }
+            if W::ON {
+                let wh = r.f64s("walls.hist")?;
+                let per = 3 * crate::engine::MAX_WALLS;
+                for (i, c) in wh.chunks_exact(per).enumerate().take(n) {
+                    for w in 0..crate::engine::MAX_WALLS {
+                        self.wall_hist[i][w] =
+                            T::from_array([c[3 * w], c[3 * w + 1], c[3 * w + 2]]);
+                    }
+                }
+            }
+        }
+        let po = r.f64s("pair_out")?;
+        self.pair_out = po
+            .chunks_exact(6)
+            .map(|c| crate::engine::PairOut {
+                f: crate::V3::new(c[0], c[1], c[2]),
+                q: crate::V3::new(c[3], c[4], c[5]),
+            })
+            .collect();
+        self.domain.load_state(&r.f64s("domain")?)?;
+        let st = r.u64s("engine.step")?;
+        let tt = r.f64s("engine.time")?;
+        self.step = st[0];
+        self.time = tt[0];
+        self.dt = tt[1];
+        self.mark_forces_valid();
+        Ok(())
     }
 }

@@ -9,7 +9,7 @@ use granflow::engine::{Body, Engine, Gravity, NoBody, NoWalls, Plane, PlaneWalls
 use granflow::particles::Particles;
 use granflow::sim::Simulation;
 use granflow::V3;
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyArrayMethods};
+use numpy::{PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -45,7 +45,8 @@ pub fn parse_law(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawParams> {
             ));
         }
     }
-    let kn = get_f64(d, "kn")?.ok_or_else(|| param_err(&format!("{prefix}kn"), "missing", "> 0"))?;
+    let kn =
+        get_f64(d, "kn")?.ok_or_else(|| param_err(&format!("{prefix}kn"), "missing", "> 0"))?;
     let mu = get_f64(d, "mu")?.unwrap_or(0.0);
     let damping = match (get_f64(d, "e_n")?, get_f64(d, "xi_n")?) {
         (Some(e), None) => Damping::Restitution(e),
@@ -79,7 +80,10 @@ pub fn vec3_rows(a: &PyReadonlyArray2<'_, f64>, name: &str, n: Option<usize>) ->
             "an (N, 3) array with one row per particle",
         ));
     }
-    Ok(a.rows().into_iter().map(|r| V3::new(r[0], r[1], r[2])).collect())
+    Ok(a.rows()
+        .into_iter()
+        .map(|r| V3::new(r[0], r[1], r[2]))
+        .collect())
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -109,7 +113,9 @@ fn with_walls<F: Form, T: Friction>(
 ) -> PyResult<Box<dyn Simulation>> {
     match (planes.is_empty(), gravity) {
         (true, None) => finish::<F, T, NoWalls, NoBody>(p, law, dom, NoWalls, NoBody, dt, skin),
-        (true, Some(g)) => finish::<F, T, NoWalls, Gravity>(p, law, dom, NoWalls, Gravity(g), dt, skin),
+        (true, Some(g)) => {
+            finish::<F, T, NoWalls, Gravity>(p, law, dom, NoWalls, Gravity(g), dt, skin)
+        }
         (false, g) => {
             let w = PlaneWalls::<F, T>::new(planes, wall_law).py_err()?;
             match g {
@@ -162,20 +168,36 @@ fn box_sim(
     let mut planes = Vec::new();
     for (axis, pos, sign) in walls.unwrap_or_default() {
         if axis > 2 || !(sign == 1.0 || sign == -1.0) || !pos.is_finite() {
-            return Err(param_err("walls", format!("({axis}, {pos}, {sign})"), "(axis 0..2, position, sign +1 or -1)"));
+            return Err(param_err(
+                "walls",
+                format!("({axis}, {pos}, {sign})"),
+                "(axis 0..2, position, sign +1 or -1)",
+            ));
         }
         if periodic[axis] {
-            return Err(param_err("walls", format!("a wall on periodic axis {axis}"), "walls only on non-periodic axes"));
+            return Err(param_err(
+                "walls",
+                format!("a wall on periodic axis {axis}"),
+                "walls only on non-periodic axes",
+            ));
         }
         planes.push(Plane { axis, pos, sign });
     }
     let g = gravity.map(V3::from);
     let frictional = law.mu > 0.0 || (!planes.is_empty() && wall_law.mu > 0.0);
     let inner = match (form, frictional) {
-        ("hooke", true) => with_walls::<Hooke, Coulomb>(p, law, dom, planes, wall_law, g, dt, skin)?,
-        ("hooke", false) => with_walls::<Hooke, Frictionless>(p, law, dom, planes, wall_law, g, dt, skin)?,
-        ("hertz", true) => with_walls::<Hertz, Coulomb>(p, law, dom, planes, wall_law, g, dt, skin)?,
-        ("hertz", false) => with_walls::<Hertz, Frictionless>(p, law, dom, planes, wall_law, g, dt, skin)?,
+        ("hooke", true) => {
+            with_walls::<Hooke, Coulomb>(p, law, dom, planes, wall_law, g, dt, skin)?
+        }
+        ("hooke", false) => {
+            with_walls::<Hooke, Frictionless>(p, law, dom, planes, wall_law, g, dt, skin)?
+        }
+        ("hertz", true) => {
+            with_walls::<Hertz, Coulomb>(p, law, dom, planes, wall_law, g, dt, skin)?
+        }
+        ("hertz", false) => {
+            with_walls::<Hertz, Frictionless>(p, law, dom, planes, wall_law, g, dt, skin)?
+        }
         _ => return Err(param_err("form", form, "'hooke' or 'hertz'")),
     };
     Sim::new(inner, "box")
@@ -199,11 +221,17 @@ fn insert_spheres<'py>(
     }
     for (i, x) in d.iter().enumerate() {
         if !(x.is_finite() && *x > 0.0) {
-            return Err(param_err(&format!("diameter[{i}]"), x, "a finite number > 0"));
+            return Err(param_err(
+                &format!("diameter[{i}]"),
+                x,
+                "a finite number > 0",
+            ));
         }
     }
     let pos = py
-        .detach(|| granflow::insert::insert(&d, V3::from(lo), V3::from(hi), periodic, seed, max_attempts))
+        .detach(|| {
+            granflow::insert::insert(&d, V3::from(lo), V3::from(hi), periodic, seed, max_attempts)
+        })
         .py_err()?;
     let flat: Vec<f64> = pos.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
     Ok(numpy::PyArray1::from_vec(py, flat).reshape([pos.len(), 3])?)
@@ -212,7 +240,12 @@ fn insert_spheres<'py>(
 /// Diameters for a solid volume from a size distribution:
 /// kind "mono" (params [d]), "discrete" (params [d1, f1, d2, f2, ...]), "uniform" ([lo, hi]).
 #[pyfunction]
-fn diameters_for_volume(kind: &str, params: Vec<f64>, volume: f64, seed: u64) -> PyResult<Vec<f64>> {
+fn diameters_for_volume(
+    kind: &str,
+    params: Vec<f64>,
+    volume: f64,
+    seed: u64,
+) -> PyResult<Vec<f64>> {
     use granflow::insert::SizeDist;
     let dist = match kind {
         "mono" if params.len() == 1 => SizeDist::Mono(params[0]),

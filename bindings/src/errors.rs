@@ -5,7 +5,12 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyKeyboardInterrupt};
 use pyo3::prelude::*;
 
-create_exception!(granflow, GranflowError, PyException, "Base class of granflow errors.");
+create_exception!(
+    granflow,
+    GranflowError,
+    PyException,
+    "Base class of granflow errors."
+);
 create_exception!(
     granflow,
     ParameterError,
@@ -24,7 +29,12 @@ create_exception!(
     GranflowError,
     "The integration became unstable; the message gives the step, particles and likely cause."
 );
-create_exception!(granflow, GranflowIOError, GranflowError, "Reading or writing failed.");
+create_exception!(
+    granflow,
+    GranflowIOError,
+    GranflowError,
+    "Reading or writing failed."
+);
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();

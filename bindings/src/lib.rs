@@ -17,6 +17,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<sim::Sim>()?;
     m.add_class::<arrow::ArrowBatch>()?;
     build::register(m)?;
+    m.add_function(wrap_pyfunction!(sim::read_checkpoint_header, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -83,6 +83,45 @@ impl Sim {
     }
 }
 
+/// Read what is needed to rebuild the simulation a checkpoint came from:
+/// (scene, params JSON, positions by id, diameters by id).
+#[pyfunction]
+pub fn read_checkpoint_header<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+) -> PyResult<(
+    String,
+    String,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+)> {
+    let r = granflow::checkpoint::Reader::read(&path).py_err()?;
+    let id = r.u32s("p.id").py_err()?;
+    let x = r.f64s("p.x").py_err()?;
+    let rad = r.f64s("p.radius").py_err()?;
+    let n = id.len();
+    let mut xo = vec![0.0; 3 * n];
+    let mut d = vec![0.0; n];
+    for (k, &i) in id.iter().enumerate() {
+        let i = i as usize;
+        if i >= n {
+            return Err(param_err(
+                "checkpoint",
+                "bad particle ids",
+                "a granflow checkpoint",
+            ));
+        }
+        xo[3 * i..3 * i + 3].copy_from_slice(&x[3 * k..3 * k + 3]);
+        d[i] = 2.0 * rad[k];
+    }
+    Ok((
+        r.text("scene").py_err()?,
+        r.text("params").py_err()?,
+        PyArray1::from_vec(py, xo).reshape([n, 3])?,
+        PyArray1::from_vec(py, d),
+    ))
+}
+
 #[pymethods]
 impl Sim {
     /// Advance `steps` steps with the GIL released. Python drives long runs in chunks
@@ -228,6 +267,25 @@ impl Sim {
             }
         }
         (m, [o.x, o.y, o.z])
+    }
+    /// Write a checkpoint atomically (tmp file, fsync, rename). `params` is the front end's
+    /// description of how to rebuild this simulation (JSON), stored alongside the state.
+    fn save_checkpoint(
+        &self,
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        params: &str,
+    ) -> PyResult<()> {
+        let mut w = granflow::checkpoint::Writer::new();
+        w.text("params", params);
+        w.text("scene", &self.scene);
+        self.inner.save_checkpoint(&mut w);
+        py.detach(|| w.write_atomic(&path)).py_err()
+    }
+    /// Restore the state from a checkpoint written by a simulation with the same parameters.
+    fn load_checkpoint(&mut self, path: std::path::PathBuf) -> PyResult<()> {
+        let r = granflow::checkpoint::Reader::read(&path).py_err()?;
+        self.inner.load_checkpoint(&r).py_err()
     }
     /// Sample tables produced since the last call.
     fn take_tables(&mut self) -> Vec<ArrowBatch> {

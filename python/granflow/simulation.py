@@ -8,8 +8,12 @@ steps, leaving the simulation usable.
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -134,10 +138,73 @@ class Simulation:
         self.wall_seconds = 0.0
 
     # -- running -------------------------------------------------------------------------
-    def run(self, steps: int, progress: bool | None = None) -> None:
-        """Advance ``steps`` steps. Ctrl-C stops between steps (the state stays consistent and
-        usable) and re-raises ``KeyboardInterrupt``."""
-        run_chunked(self._sim, steps, progress, self)
+    def run(
+        self,
+        steps: int,
+        progress: bool | None = None,
+        checkpoint: str | os.PathLike | None = None,
+        checkpoint_every: int | None = None,
+    ) -> None:
+        """Advance ``steps`` steps.
+
+        Ctrl-C (or SIGTERM) stops between steps: the state stays consistent and usable, a
+        checkpoint is written if ``checkpoint`` is set, and ``KeyboardInterrupt`` is re-raised.
+        With ``checkpoint_every = n`` a checkpoint is also written every n steps (atomically:
+        a crash loses at most the steps since the last one)."""
+        hook = None
+        if checkpoint is not None:
+            path = os.fspath(checkpoint)
+
+            def hook() -> None:
+                self.save_checkpoint(path)
+
+        run_chunked(self._sim, steps, progress, self, every=checkpoint_every, on_every=hook,
+                    on_stop=hook)
+
+    # -- checkpoints ---------------------------------------------------------------------
+    def _rebuild_params(self) -> dict:
+        return {
+            "class": "Simulation",
+            "law": asdict(self.law),
+            "wall_law": asdict(self.wall_law) if self.wall_law else None,
+            "box": asdict(self.box),
+            "walls": [asdict(w) for w in self.walls],
+            "gravity": list(self.gravity) if self.gravity is not None else None,
+            "density": self.density,
+            "dt": self.timestep,
+            "skin": self.skin,
+        }
+
+    def save_checkpoint(self, path: str | os.PathLike) -> None:
+        """Write the complete state (particles, contact histories, step, time) atomically."""
+        self._sim.save_checkpoint(os.fspath(path), json.dumps(self._rebuild_params()))
+
+    @classmethod
+    def from_checkpoint(cls, path: str | os.PathLike, threads: int | None = None) -> Simulation:
+        """Rebuild a simulation from a checkpoint; it continues bitwise identically."""
+        scene, params, x, d = _core.read_checkpoint_header(os.fspath(path))
+        p = json.loads(params)
+        if p.get("class") != "Simulation":
+            raise ParameterError(
+                f"invalid checkpoint: written by {p.get('class')!r}: allowed a Simulation "
+                "checkpoint (use the scene's from_checkpoint)"
+            )
+        b = p["box"]
+        sim = cls(
+            x,
+            d,
+            Box(length=tuple(b["length"]), lo=tuple(b["lo"]), periodic=tuple(b["periodic"])),
+            ContactLaw(**p["law"]),
+            density=p["density"],
+            walls=[Wall(**w) for w in p["walls"]],
+            wall_law=ContactLaw(**p["wall_law"]) if p["wall_law"] else None,
+            gravity=tuple(p["gravity"]) if p["gravity"] else None,
+            dt=p["dt"],
+            skin=p["skin"],
+            threads=threads,
+        )
+        sim._sim.load_checkpoint(os.fspath(path))
+        return sim
 
     # -- state ---------------------------------------------------------------------------
     @property
@@ -213,11 +280,30 @@ class Simulation:
         }
 
 
-def run_chunked(sim: _core.Sim, steps: int, progress: bool | None, owner: object = None) -> None:
-    """Run ``steps`` steps in chunks of ~0.25 s (progress bar, Ctrl-C between chunks)."""
+class _Terminated(BaseException):
+    """Raised inside a run when SIGTERM arrives, so the run stops between steps."""
+
+
+def run_chunked(
+    sim: _core.Sim,
+    steps: int,
+    progress: bool | None,
+    owner: object = None,
+    every: int | None = None,
+    on_every: Callable[[], None] | None = None,
+    on_stop: Callable[[], None] | None = None,
+    after_chunk: Callable[[], None] | None = None,
+) -> None:
+    """Run ``steps`` steps in chunks of ~0.25 s (progress bar, Ctrl-C between chunks).
+
+    ``on_every`` runs whenever the step count crosses a multiple of ``every``; ``on_stop`` runs
+    when the run is interrupted (Ctrl-C or SIGTERM) before the interrupt propagates;
+    ``after_chunk`` after every chunk (e.g. to drain sample tables)."""
     steps = int(steps)
     if steps < 0:
         raise ParameterError(f"invalid steps = {steps}: allowed >= 0")
+    if every is not None and every <= 0:
+        raise ParameterError(f"invalid checkpoint_every = {every}: allowed >= 1")
     if steps == 0:
         sim.compute_forces()
         return
@@ -225,18 +311,40 @@ def run_chunked(sim: _core.Sim, steps: int, progress: bool | None, owner: object
     done = 0
     chunk = max(1, min(steps, 10))
     t_start = time.perf_counter()
+    old_term = None
+    if threading.current_thread() is threading.main_thread():
+
+        def _term(signum, frame):  # noqa: ARG001
+            raise _Terminated()
+
+        old_term = signal.signal(signal.SIGTERM, _term)
     try:
         while done < steps:
             c = min(chunk, steps - done)
+            if every:
+                c = min(c, every - sim.step % every)
             t0 = time.perf_counter()
             sim.run(c)
             el = time.perf_counter() - t0
             done += c
+            if after_chunk is not None:
+                after_chunk()
+            if every and on_every is not None and sim.step % every == 0:
+                on_every()
             bar.update(done, sim.time)
-            # aim for ~0.25 s per chunk
             if el > 0:
                 chunk = int(min(max(1, c * 0.25 / el), 2 * c + 1, 1_000_000))
+    except (KeyboardInterrupt, _Terminated) as exc:
+        if after_chunk is not None:
+            after_chunk()
+        if on_stop is not None:
+            on_stop()
+        if isinstance(exc, _Terminated):
+            raise SystemExit(128 + signal.SIGTERM) from None
+        raise
     finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
         bar.close()
         if owner is not None:
             owner.wall_seconds = getattr(owner, "wall_seconds", 0.0) + (
