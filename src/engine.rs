@@ -166,6 +166,10 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub want_virial: bool,
     /// Per-pair forces of the last evaluation (list order).
     pub pair_out: Vec<PairOut>,
+    /// 1 where the pair was in contact at the last evaluation (list order). Lets the force loop
+    /// touch a pair's output and history only when it is or just was in contact; `pair_out` is
+    /// zero for every pair not in contact.
+    pub in_contact: Vec<u8>,
     forces_valid: bool,
 }
 
@@ -261,6 +265,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             diag: StepDiag::default(),
             want_virial: false,
             pair_out: Vec::new(),
+            in_contact: Vec::new(),
             forces_valid: false,
         };
         e.wrap_all();
@@ -306,7 +311,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.wall_hist = perm.iter().map(|&k| old[k]).collect();
         }
         self.domain.on_rebuild();
-        self.pair_out.resize(self.nl.len(), PairOut::default());
+        let np = self.nl.len();
+        self.pair_out.clear();
+        self.pair_out.resize(np, PairOut::default());
+        // carried histories belong to open contacts: mark them so they are reset if the
+        // contact turns out to be open at the next evaluation
+        self.in_contact.clear();
+        self.in_contact.resize(np, 0);
+        if T::FRICTIONAL {
+            let zero = T::History::default();
+            for (f, h) in self.in_contact.iter_mut().zip(&self.nl.hist) {
+                *f = (*h != zero) as u8;
+            }
+        }
     }
 
     /// Forces in `p` correspond to the state (after loading a checkpoint).
@@ -435,8 +452,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .zip(nl.pair_j.par_chunks(PAIR_CHUNK))
             .zip(nl.hist.par_chunks_mut(PAIR_CHUNK.max(1)))
             .zip(self.pair_out.par_chunks_mut(PAIR_CHUNK))
+            .zip(self.in_contact.par_chunks_mut(PAIR_CHUNK))
             .enumerate()
-            .map(|(ci, (((pi, pj), hist), out))| {
+            .map(|(ci, ((((pi, pj), hist), out), flag))| {
                 let mut max_ov = 0.0f64;
                 let mut at = 0usize;
                 let mut vir = M3::zeros();
@@ -449,12 +467,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     let (ri, rj) = (p.radius[i], p.radius[j]);
                     let rs = ri + rj;
                     if r2 >= rs * rs {
-                        if T::FRICTIONAL {
-                            hist[k] = T::History::default();
+                        if flag[k] != 0 {
+                            // the contact just opened: drop its history and force
+                            if T::FRICTIONAL {
+                                hist[k] = T::History::default();
+                            }
+                            out[k] = PairOut::default();
+                            flag[k] = 0;
                         }
-                        out[k] = PairOut::default();
                         continue;
                     }
+                    flag[k] = 1;
                     nc += 1;
                     let r = r2.sqrt();
                     let n = d / r;
@@ -507,6 +530,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
         // Phase 2: gather per particle in list order; walls and gravity.
         let pair_out = &self.pair_out;
+        let flags = &self.in_contact;
         let own_start = &nl.own_start;
         let rev_start = &nl.rev_start;
         let rev_k = &nl.rev_k;
@@ -534,14 +558,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 let mut f = V3::zeros();
                 let mut q = V3::zeros();
                 for k in own_start[i]..own_start[i + 1] {
-                    let o = &pair_out[k as usize];
-                    f += o.f;
-                    q += o.q;
+                    if flags[k as usize] != 0 {
+                        let o = &pair_out[k as usize];
+                        f += o.f;
+                        q += o.q;
+                    }
                 }
                 for r in rev_start[i]..rev_start[i + 1] {
-                    let o = &pair_out[rev_k[r as usize] as usize];
-                    f -= o.f;
-                    q += o.q;
+                    let k = rev_k[r as usize] as usize;
+                    if flags[k] != 0 {
+                        let o = &pair_out[k];
+                        f -= o.f;
+                        q += o.q;
+                    }
                 }
                 let mut t = rad[i] * q;
                 if W::ON {

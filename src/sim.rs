@@ -240,6 +240,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .flat_map(|o| [o.f.x, o.f.y, o.f.z, o.q.x, o.q.y, o.q.z])
             .collect();
         w.f64s("pair_out", &po);
+        let flags: Vec<u32> = self.in_contact.iter().map(|&f| f as u32).collect();
+        w.u32s("in_contact", &flags);
         w.f64s("domain", &self.domain.save_state());
     }
 
@@ -336,6 +338,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 q: crate::V3::new(c[3], c[4], c[5]),
             })
             .collect();
+        self.in_contact = r.u32s("in_contact")?.iter().map(|&f| f as u8).collect();
         self.domain.load_state(&r.f64s("domain")?)?;
         let st = r.u64s("engine.step")?;
         let tt = r.f64s("engine.time")?;
