@@ -36,7 +36,7 @@ def test_snapshots(tmp_path, gas, make_sim):
     lines = p.read_text().splitlines()
     assert int(lines[0]) == s.n and 'Lattice="8 0 0 0 8 0 0 0 8"' in lines[1]
     row = np.array(lines[2].split()[1:], float)
-    assert row.shape == (14,)
+    assert row.shape == (13,)
     np.testing.assert_allclose(row[:3], s.get_positions()[0], rtol=1e-9)
     q = io.snapshot(s, tmp_path / "snap.vtp")
     root = ET.parse(q).getroot()
