@@ -18,6 +18,9 @@ pub trait Domain: Clone + Send + Sync + 'static {
     /// Parrinello–Rahman cell (002 2.10a: dr/dt = p/m + L r). Contacts then add L r_ij to the
     /// relative velocity.
     const STREAMING: bool = false;
+    /// No external work is done on the particles by the domain (a static box): with no body
+    /// force the total energy can only decrease, which the engine's energy guard checks.
+    const CLOSED: bool = false;
     /// The streaming velocity difference L r_ij for a displacement r_ij (only if `STREAMING`).
     #[inline(always)]
     fn streaming_velocity(&self, _rij: &V3) -> V3 {
@@ -125,6 +128,7 @@ impl OrthoBox {
 
 impl Domain for OrthoBox {
     const NAME: &'static str = "orthogonal box";
+    const CLOSED: bool = true;
     fn periodic(&self) -> [bool; 3] {
         self.periodic
     }

@@ -170,6 +170,8 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// touch a pair's output and history only when it is or just was in contact; `pair_out` is
     /// zero for every pair not in contact.
     pub in_contact: Vec<u8>,
+    /// Total energy at the first guard check (closed systems only).
+    energy_ref: Option<f64>,
     forces_valid: bool,
 }
 
@@ -266,6 +268,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             want_virial: false,
             pair_out: Vec::new(),
             in_contact: Vec::new(),
+            energy_ref: None,
             forces_valid: false,
         };
         e.wrap_all();
@@ -333,6 +336,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// Mark the state as changed from outside (positions or velocities set by the user).
     pub fn invalidate(&mut self) {
+        self.energy_ref = None;
         self.nl.valid = false;
         self.forces_valid = false;
     }
@@ -377,6 +381,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.check_overlap()?;
         if self.step % self.guards.check_every == 0 {
             self.check_finite()?;
+            if D::CLOSED && !G::ON {
+                self.check_energy()?;
+            }
         }
         Ok(())
     }
@@ -403,6 +410,36 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     self.contact_time()
                 ),
             });
+        }
+        Ok(())
+    }
+
+    /// A closed system without body force cannot gain energy: contacts are passive. Growth by
+    /// half again over the first checked value means the integration is unstable.
+    fn check_energy(&mut self) -> Result<()> {
+        let (et, er) = self.p.kinetic_energy();
+        let e = et + er + self.elastic_energy_sum();
+        let n = self.p.len() as f64;
+        let d = 2.0 * self.p.max_radius();
+        let floor = 1e-12 * self.law.params.kn * d * d * n;
+        match self.energy_ref {
+            None => self.energy_ref = Some(e),
+            Some(e0) => {
+                if e > 1.5 * e0 + floor {
+                    return Err(Error::Instability {
+                        step: self.step,
+                        particles: vec![],
+                        message: format!(
+                            "total energy grew from {e0:.4e} to {e:.4e} with no energy source"
+                        ),
+                        cause: format!(
+                            "dt = {:.3e} too large against t_c = {:.3e} (keep dt <= t_c/10)",
+                            self.dt,
+                            self.contact_time()
+                        ),
+                    });
+                }
+            }
         }
         Ok(())
     }
