@@ -7,10 +7,9 @@ import sys
 import textwrap
 import time
 
+import granflow as gf
 import numpy as np
 import pytest
-
-import granflow as gf
 
 
 def _sim(gas, make_sim, **kw):

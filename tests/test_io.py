@@ -2,12 +2,11 @@
 
 import xml.etree.ElementTree as ET
 
+import granflow as gf
 import numpy as np
 import polars as pl
 import pyarrow as pa
 import pyarrow.dataset as ds
-
-import granflow as gf
 from granflow import io
 
 

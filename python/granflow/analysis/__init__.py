@@ -1,0 +1,133 @@
+"""Pure-Python analysis of granflow output tables (docs/columns.md).
+
+* :mod:`.errors` — Flyvbjerg-Petersen blocking, steady-state detection, SE against run time
+  (also for binned profiles), jackknife over blocks.
+* :mod:`.channel` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran 2022).
+* :mod:`.rheology` — stress-controlled cell, paper 002 (Srivastava et al.), Table 1.
+* :mod:`.plots` — the papers' figures and error / work-precision plots (PNG).
+"""
+
+from . import channel, errors, plots, rheology
+from .channel import (
+    ChannelProfiles,
+    Estimate,
+    FlowState,
+    Zones,
+    conduction_length,
+    flow_state,
+    mean_velocity_32,
+    mu_B3,
+    phi_B4,
+    profiles,
+    scaled_profile_31,
+    summary,
+    velocity_profile_31,
+    velocity_scaling,
+    zones,
+)
+from .errors import (
+    BlockingResult,
+    MeanSE,
+    ProfileErrors,
+    SEvsTime,
+    SteadyStart,
+    as_columns,
+    blocking,
+    blocking_many,
+    mean_se,
+    profile_se,
+    profile_se_vs_time,
+    ratio_se,
+    se_vs_time,
+    steady_state_start,
+    to_polars,
+)
+from .plots import (
+    plot_cell_rheology,
+    plot_channel_fields,
+    plot_channel_mu_phi_I,
+    plot_channel_velocity,
+    plot_se_vs_time,
+    plot_work_precision,
+)
+from .rheology import (
+    FitResult,
+    RunResult,
+    RunState,
+    analyse_run,
+    classify_run,
+    collect_runs,
+    fit_all,
+    fit_flow_law,
+    fit_law,
+    format_table1,
+    load_table1,
+    pool_realizations,
+    print_table1,
+    reference_curve,
+    reference_parameters,
+    table1_row,
+)
+
+__all__ = [
+    "channel",
+    "errors",
+    "plots",
+    "rheology",
+    # errors
+    "BlockingResult",
+    "MeanSE",
+    "ProfileErrors",
+    "SEvsTime",
+    "SteadyStart",
+    "as_columns",
+    "blocking",
+    "blocking_many",
+    "mean_se",
+    "profile_se",
+    "profile_se_vs_time",
+    "ratio_se",
+    "se_vs_time",
+    "steady_state_start",
+    "to_polars",
+    # channel
+    "ChannelProfiles",
+    "Estimate",
+    "FlowState",
+    "Zones",
+    "conduction_length",
+    "flow_state",
+    "mean_velocity_32",
+    "mu_B3",
+    "phi_B4",
+    "profiles",
+    "scaled_profile_31",
+    "summary",
+    "velocity_profile_31",
+    "velocity_scaling",
+    "zones",
+    # rheology
+    "FitResult",
+    "RunResult",
+    "RunState",
+    "analyse_run",
+    "classify_run",
+    "collect_runs",
+    "fit_all",
+    "fit_flow_law",
+    "fit_law",
+    "format_table1",
+    "load_table1",
+    "pool_realizations",
+    "print_table1",
+    "reference_curve",
+    "reference_parameters",
+    "table1_row",
+    # plots
+    "plot_cell_rheology",
+    "plot_channel_fields",
+    "plot_channel_mu_phi_I",
+    "plot_channel_velocity",
+    "plot_se_vs_time",
+    "plot_work_precision",
+]

@@ -1,0 +1,945 @@
+"""Vertical-channel analysis (paper 000: Debnath, Kesava Rao & Kumaran, J. Fluid Mech. 2022).
+
+Geometry and units: walls at x = 0 and x = W, gravity along -y, so the material flows in -y and
+``u_y < 0``.  Lengths in d, velocities in sqrt(g d), stresses in rho_p g d (rho_p = d = g = 1).
+Throughout, ``u`` is the velocity *along the flow* (``u = -u_y`` for flow in -y; the sign is
+detected from the data), ``xi`` is the distance from the nearest wall and ``gamma_dot = du/dxi``
+(positive in the shear layers).  The paper's ``du_y/dx`` keeps its sign in ``du_y_dx`` (profile
+across the whole channel, or the wall-0 half after folding).
+
+Errors: profiles are averaged over the windows of the steady part.  Each derived quantity
+(profiles, u_slip, delta_0.95, fits, zone boundaries, ...) is computed from window-averaged raw
+columns and its standard error comes from a delete-one-block jackknife over ``n_blocks``
+contiguous blocks of windows; the block length is at least the statistical inefficiency g (in
+windows) of the spatially averaged flow velocity, so that blocks are nearly independent
+(:func:`granflow.analysis.errors.choose_blocks`).
+
+Columns used from the ``bins`` table (docs/columns.md): window, t0, t1, n_samples, bin, x_lo,
+x_hi, x, phi, u_y, w_z, T, sigma_xx, sigma_xy, Gamma, shear_production (missing optional
+columns give NaN results for the quantities that need them).  From ``series``: t, vcm_y and
+the wall stresses wall{0,1}_sigma_{xx,xy}.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import polars as pl
+from scipy import optimize
+
+from .errors import (
+    BinMatrix,
+    FloatArray,
+    SteadyStart,
+    TableLike,
+    bin_matrix,
+    block_means,
+    blocking,
+    choose_blocks,
+    column,
+    column_names,
+    jackknife_se,
+    mean_se,
+    profile_se,
+    quiet,
+    ratio_se,
+    sample_interval,
+    steady_state_start,
+    trend,
+    window_steady_start,
+)
+
+#: Volume fraction for arrested dynamics used by paper 000 for mu_p = 0.5 (section 1, 3.2).
+PHI_AD = 0.587
+#: Random close packing volume fraction used in fig. 11(b) / fig. 13 of paper 000.
+PHI_RCP = 0.64
+#: Parameters of (B3)/(B4) used for the dotted lines of fig. 11 (Jop 2015, quoted in 000 §3.2).
+JOP2015: dict[str, float] = {
+    "mu_s": 0.384,
+    "mu_inf": 0.625,
+    "I0": 0.3,
+    "phi_min": 0.4,
+    "phi_max": 0.6,
+}
+#: Conduction length reported in 000 §3.2 for the plug temperature (B13 fit), in d.
+L_C_PAPER = 11.5
+
+RAW_COLUMNS = (
+    "phi",
+    "u_y",
+    "w_z",
+    "T",
+    "sigma_xx",
+    "sigma_xy",
+    "sigma_yy",
+    "sigma_zz",
+    "Gamma",
+    "shear_production",
+    "count",
+)
+# quantities that change sign under x -> W - x (folded antisymmetrically)
+_ANTISYMMETRIC = {"du_y_dx", "w_z", "sigma_xy"}
+
+
+# --------------------------------------------------------------------------------------------
+# model curves
+# --------------------------------------------------------------------------------------------
+@quiet
+def scaled_profile_31(xi: npt.ArrayLike, delta: float) -> FloatArray:
+    """Eq. (3.1): ``(u - u_slip)/(u_max - u_slip) = 1 - exp(-3 x / delta_0.95)``."""
+    return 1.0 - np.exp(-3.0 * np.asarray(xi, dtype=np.float64) / delta)
+
+
+@quiet
+def velocity_profile_31(xi: npt.ArrayLike, u_slip: float, u_max: float, delta: float) -> FloatArray:
+    """Eq. (3.1) solved for the velocity: ``u = u_slip + (u_max - u_slip)(1 - exp(-3x/delta))``."""
+    return u_slip + (u_max - u_slip) * scaled_profile_31(xi, delta)
+
+
+@quiet
+def mean_velocity_32(u_slip: float, u_max: float, delta: float, W: float) -> float:
+    """Eq. (3.2): ``ubar = u_max - 2 delta (u_max - u_slip)(1 - exp(-3W/(2 delta))) / (3W)``,
+    the width average of (3.1) over 0 <= x <= W/2."""
+    return u_max - 2.0 * delta * (u_max - u_slip) * (1.0 - math.exp(-1.5 * W / delta)) / (3.0 * W)
+
+
+@quiet
+def mu_B3(
+    I: npt.ArrayLike,  # noqa: E741 - the paper's symbol
+    mu_s: float = JOP2015["mu_s"],
+    mu_inf: float = JOP2015["mu_inf"],
+    I0: float = JOP2015["I0"],
+) -> FloatArray:
+    """Eq. (B3): ``mu(I) = mu_s + (mu_inf - mu_s) / (1 + I0 / I)`` (defaults: Jop 2015)."""
+    ii = np.asarray(I, dtype=np.float64)
+    with np.errstate(divide="ignore"):
+        return mu_s + (mu_inf - mu_s) / (1.0 + I0 / ii)
+
+
+@quiet
+def phi_B4(
+    I: npt.ArrayLike,  # noqa: E741 - the paper's symbol
+    phi_max: float = JOP2015["phi_max"],
+    phi_min: float = JOP2015["phi_min"],
+) -> FloatArray:
+    """Eq. (B4): ``phi(I) = phi_max - (phi_max - phi_min) I`` (defaults: Jop 2015)."""
+    return phi_max - (phi_max - phi_min) * np.asarray(I, dtype=np.float64)
+
+
+@quiet
+def conduction_profile_B13(xc: npt.ArrayLike, T_c: float, l_c: float) -> FloatArray:
+    """Solution of (B13) with zero flux at the centre:
+    ``T^{3/2}(xc) = T_c^{3/2} cosh(xc / l_c)``, i.e. ``T = T_c cosh(xc/l_c)^{2/3}``, where
+    ``xc`` is the distance from the channel centre."""
+    return T_c * np.cosh(np.asarray(xc, dtype=np.float64) / l_c) ** (2.0 / 3.0)
+
+
+# --------------------------------------------------------------------------------------------
+# flow state from the centre-of-mass velocity
+# --------------------------------------------------------------------------------------------
+@dataclass
+class FlowState:
+    """Classification of the centre-of-mass velocity series.
+
+    The last ``tail_fraction`` of the series is examined; ``v = |vcm_y|`` along the flow.
+
+    1. ``arrested``: ``max |v| < v_arrest sqrt(g d)`` on the tail.
+    2. ``accelerating`` / ``decelerating``: the fitted slope of ``v(t)`` is significant
+       (``|t_stat| > t_sig``, slope SE corrected for serial correlation) and either
+       ``|slope| > accel_fraction g`` or the relative drift across the tail
+       ``|slope| T_tail / v_mean`` exceeds ``max_rel_drift``.  (``decelerating`` is an extra
+       state for a flow slowing down, e.g. on its way to arrest: not steady either.)
+    3. ``fluctuating``: relative fluctuation amplitude ``(p95 - p5) / (2 v_mean)`` above
+       ``max_rel_amplitude`` (paper 000 §3.1 / fig. 3: < 1 % variation is steady, 1-2 % at
+       phi_bar = 0.62 is fluctuating).
+    4. ``steady`` otherwise.
+    """
+
+    state: str
+    v_mean: float
+    v_std: float
+    rel_amplitude: float
+    slope: float
+    slope_se: float
+    t_stat: float
+    rel_drift: float
+    t_tail_start: float
+    thresholds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def is_steady(self) -> bool:
+        """True for 'steady' and 'fluctuating' (a statistically stationary flow)."""
+        return self.state in ("steady", "fluctuating")
+
+
+@quiet
+def flow_state(
+    series: TableLike,
+    *,
+    column_name: str = "vcm_y",
+    tail_fraction: float = 0.5,
+    g: float = 1.0,
+    d: float = 1.0,
+    v_arrest: float = 1e-3,
+    max_rel_amplitude: float = 0.01,
+    accel_fraction: float = 0.01,
+    max_rel_drift: float = 0.05,
+    t_sig: float = 3.0,
+) -> FlowState:
+    """Classify a channel run as 'steady', 'fluctuating', 'arrested', 'accelerating' or
+    'decelerating' from its centre-of-mass velocity (criteria in :class:`FlowState`).
+
+    Parameters
+    ----------
+    series
+        Channel ``series`` table (needs ``t`` and ``column_name``) or a mapping.
+    tail_fraction
+        Fraction of the series (at its end) that is examined.
+    g, d
+        Gravity and particle diameter (velocity scale ``sqrt(g d)``).
+    v_arrest, max_rel_amplitude, accel_fraction, max_rel_drift, t_sig
+        Thresholds (see :class:`FlowState`).
+    """
+    t = column(series, "t")
+    v = np.abs(column(series, column_name))
+    n = t.size
+    i0 = int(math.floor((1.0 - tail_fraction) * n))
+    tt, vv = t[i0:], v[i0:]
+    thr = {
+        "v_arrest": v_arrest * math.sqrt(g * d),
+        "max_rel_amplitude": max_rel_amplitude,
+        "accel": accel_fraction * g,
+        "max_rel_drift": max_rel_drift,
+        "t_sig": t_sig,
+    }
+    tr = trend(tt, vv)
+    vmean = float(np.mean(vv)) if vv.size else np.nan
+    p5, p95 = np.percentile(vv, [5, 95]) if vv.size else (np.nan, np.nan)
+    amp = float((p95 - p5) / (2.0 * vmean)) if vmean > 0 else np.inf
+    if vv.size == 0:
+        state = "arrested"
+    elif float(np.max(vv)) < thr["v_arrest"]:
+        state = "arrested"
+    elif abs(tr.t_stat) > t_sig and (
+        abs(tr.slope) > thr["accel"] or abs(tr.rel_drift) > max_rel_drift
+    ):
+        state = "accelerating" if tr.slope > 0 else "decelerating"
+    elif amp > max_rel_amplitude:
+        state = "fluctuating"
+    else:
+        state = "steady"
+    return FlowState(
+        state,
+        vmean,
+        float(np.std(vv)) if vv.size else np.nan,
+        amp,
+        tr.slope,
+        tr.slope_se,
+        tr.t_stat,
+        tr.rel_drift,
+        float(tt[0]) if tt.size else np.nan,
+        thr,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# profiles with jackknife errors
+# --------------------------------------------------------------------------------------------
+@dataclass
+class Estimate:
+    """A value with its standard error."""
+
+    value: float
+    se: float
+
+    def as_dict(self) -> dict[str, float]:
+        """``{"value": ..., "se": ...}``."""
+        return {"value": float(self.value), "se": float(self.se)}
+
+
+@dataclass
+class ChannelProfiles:
+    """Window-averaged channel profiles of the steady part, with jackknife machinery.
+
+    ``derived(m)`` maps raw column means ``m`` (full channel) to the half-profile quantities
+    (folded about the centre line if ``folded``, else the wall-0 half x <= W/2); ``estimate(fn)``
+    returns ``fn(derived)`` and its delete-one-block jackknife SE.
+
+    Half-profile quantities (arrays over the half-profile bins, ``xi`` = bin-centre distance from
+    the wall): u, gamma_dot (= du/dxi), du_y_dx, abs_dudx, phi, T, sigma_xx, sigma_xy, w_z,
+    mu (= |sigma_xy/sigma_xx|), I (= |du_y/dx| d / sqrt(sigma_xx/rho_p)), omega_ratio
+    (= Omega_z/(du_y/dx)), p_phi (B8: sigma_xx/T), mu_phi (B9: |sigma_xy|/(|du_y/dx| T^1/2)),
+    D_phi (B10: Gamma/T^3/2), Gamma, production (= |shear_production|), gamma_over_sqrtT
+    (= d |du_y/dx| / sqrt(T), fig. 9b).
+    """
+
+    xi: FloatArray
+    xi_lo: FloatArray
+    xi_hi: FloatArray
+    W: float
+    folded: bool
+    sign: float
+    d: float
+    rho_p: float
+    t_start: float
+    n_windows: int
+    n_blocks: int
+    block_len: int
+    x_full: FloatArray
+    width_full: FloatArray
+    full: dict[str, FloatArray] = field(repr=False)
+    loo: dict[str, FloatArray] = field(repr=False)
+    _cache: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    # ---- derived quantities ------------------------------------------------------------
+    @quiet
+    def derived(self, m: Mapping[str, FloatArray] | None = None) -> dict[str, FloatArray]:
+        """Half-profile derived quantities from raw full-channel means ``m`` (default: all
+        steady windows)."""
+        if m is None:
+            if "full" not in self._cache:
+                self._cache["full"] = self._derive(self.full)
+            return self._cache["full"]
+        return self._derive(m)
+
+    def _derive(self, m: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+        x = self.x_full
+        nan = np.full(x.size, np.nan)
+        get = lambda k: np.asarray(m[k]) if k in m else nan  # noqa: E731
+        u_y = get("u_y")
+        dudx = np.gradient(u_y, x) if x.size >= 2 else nan
+        side = np.where(x <= 0.5 * self.W, 1.0, -1.0)
+        sxx, sxy, T = get("sigma_xx"), get("sigma_xy"), get("T")
+        absd = np.abs(dudx)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q: dict[str, FloatArray] = {
+                "u": self.sign * u_y,
+                "gamma_dot": self.sign * dudx * side,
+                "du_y_dx": dudx,
+                "abs_dudx": absd,
+                "phi": get("phi"),
+                "T": T,
+                "sigma_xx": sxx,
+                "sigma_xy": sxy,
+                "w_z": get("w_z"),
+                "mu": np.abs(sxy / sxx),
+                "I": absd * self.d / np.sqrt(np.abs(sxx) / self.rho_p),
+                "omega_ratio": get("w_z") / dudx,
+                "p_phi": sxx / T,
+                "mu_phi": np.abs(sxy) / (absd * np.sqrt(T)),
+                "D_phi": get("Gamma") / T**1.5,
+                "Gamma": get("Gamma"),
+                "production": np.abs(get("shear_production")),
+                "gamma_over_sqrtT": self.d * absd / np.sqrt(T),
+            }
+        return {k: self._half(v, k in _ANTISYMMETRIC) for k, v in q.items()}
+
+    def _half(self, q: FloatArray, anti: bool) -> FloatArray:
+        h = (q.size + 1) // 2
+        if not self.folded:
+            return q[:h]
+        mirror = q[::-1][:h]
+        return 0.5 * (q[:h] + (-mirror if anti else mirror))
+
+    # ---- jackknife ------------------------------------------------------------------------
+    @quiet
+    def estimate(self, fn: Callable[[dict[str, FloatArray]], Any]) -> tuple[Any, Any]:
+        """``(fn(derived()), jackknife SE)`` over the blocks of windows."""
+        value = fn(self.derived())
+        reps = []
+        for i in range(self.n_blocks):
+            reps.append(fn(self._derive({k: v[i] for k, v in self.loo.items()})))
+        return value, jackknife_se(value, reps)
+
+    @quiet
+    def table(self) -> pl.DataFrame:
+        """Half profile: xi, xi_lo, xi_hi and every derived quantity with its ``_se``."""
+        if "table" in self._cache:
+            return self._cache["table"]
+        keys = list(self.derived().keys())
+        vals, ses = self.estimate(lambda q: np.array([q[k] for k in keys]))
+        out: dict[str, Any] = {"xi": self.xi, "xi_lo": self.xi_lo, "xi_hi": self.xi_hi}
+        for j, k in enumerate(keys):
+            out[k] = vals[j]
+            out[f"{k}_se"] = ses[j]
+        self._cache["table"] = pl.DataFrame(out)
+        return self._cache["table"]
+
+
+def _steady_windows(
+    bm: BinMatrix, series: TableLike | None, start_time: float | None
+) -> tuple[float, SteadyStart | None]:
+    """Start time of the steady part: given, else from vcm_y of ``series``, else from the
+    per-window mean velocity of the bins."""
+    if start_time is not None:
+        return float(start_time), None
+    if series is not None and "vcm_y" in column_names(series):
+        ss = steady_state_start(column(series, "t"), np.abs(column(series, "vcm_y")))
+        return ss.t_start, ss
+    ss = window_steady_start(bm, "u_y")
+    return ss.t_start, ss
+
+
+@quiet
+def profiles(
+    bins: TableLike,
+    series: TableLike | None = None,
+    *,
+    start_time: float | None = None,
+    symmetrise: bool = True,
+    n_blocks: int | None = None,
+    max_blocks: int = 32,
+    d: float = 1.0,
+    rho_p: float = 1.0,
+) -> ChannelProfiles:
+    """Average the channel ``bins`` over the steady windows and prepare jackknife blocks.
+
+    Parameters
+    ----------
+    bins, series
+        Channel tables (docs/columns.md).  ``series`` is only used to find the steady start.
+    start_time
+        First time of the steady part (windows with ``t0 >= start_time`` are used); default:
+        MSER on |vcm_y| of ``series`` or on the per-window mean u_y.
+    symmetrise
+        Fold the profile about x = W/2 (requires mirror-symmetric bins; otherwise the
+        wall-0 half is used with a warning).
+    n_blocks
+        Number of jackknife blocks (default from the correlation of the window series, at most
+        ``max_blocks``).
+    d, rho_p
+        Particle diameter and density for I (B3) and the kinetic coefficients.
+    """
+    bm = bin_matrix(bins, [c for c in RAW_COLUMNS if c in column_names(bins)])
+    if "u_y" not in bm.data:
+        raise ValueError("bins table needs a u_y column")
+    t_start, _ = _steady_windows(bm, series, start_time)
+    tw = bm.t0 if np.all(np.isfinite(bm.t0)) else bm.t_mid
+    keep = tw >= t_start - 1e-9 * max(1.0, abs(t_start))
+    if keep.sum() < 2:
+        keep = np.ones_like(keep)
+    bm = bm.select(keep)
+    nw = bm.window.size
+    if nw < 2:
+        raise ValueError("need at least two steady windows")
+    if n_blocks is None:
+        g = blocking(np.nanmean(bm.data["u_y"], axis=1)).g
+        block_len, nb = choose_blocks(nw, g, max_blocks)
+    else:
+        nb = int(n_blocks)
+    nb = max(2, min(nb, nw))
+    block_len = nw // nb
+    full: dict[str, FloatArray] = {}
+    loo: dict[str, FloatArray] = {}
+    kept = np.ones(nw, bool)
+    for k, mat in bm.data.items():
+        f, lo, kept = block_means(mat, bm.n_samples, block_len)
+        full[k], loo[k] = f, lo
+    x_lo, x_hi, x = bm.x_lo, bm.x_hi, bm.x
+    W = float(np.nanmax(x_hi)) if np.all(np.isfinite(x_hi)) else float(np.max(x) + np.min(x))
+    if np.all(np.isfinite(x_lo + x_hi)):
+        width = x_hi - x_lo
+    else:
+        width = np.gradient(x)
+    sym = bool(np.allclose(x + x[::-1], W, atol=1e-6 * max(W, 1.0)))
+    folded = symmetrise and sym
+    if symmetrise and not sym:
+        warnings.warn(
+            "bins are not mirror-symmetric about W/2: using the x <= W/2 half", stacklevel=2
+        )
+    sign = -1.0 if float(np.nanmean(full["u_y"])) < 0 else 1.0
+    h = (x.size + 1) // 2
+    xi = x[:h].copy()
+    xi_lo = x_lo[:h].copy() if np.all(np.isfinite(x_lo)) else xi - 0.5 * width[:h]
+    xi_hi = np.minimum(x_hi[:h], 0.5 * W) if np.all(np.isfinite(x_hi)) else xi + 0.5 * width[:h]
+    t_used = float(tw[keep][kept][0]) if kept.any() else t_start
+    return ChannelProfiles(
+        xi=xi,
+        xi_lo=xi_lo,
+        xi_hi=xi_hi,
+        W=W,
+        folded=folded,
+        sign=sign,
+        d=d,
+        rho_p=rho_p,
+        t_start=t_used,
+        n_windows=int(kept.sum()),
+        n_blocks=int(nb),
+        block_len=int(block_len),
+        x_full=x,
+        width_full=width,
+        full=full,
+        loo=loo,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# velocity scaling (section 3.1)
+# --------------------------------------------------------------------------------------------
+def _u_slip(q: Mapping[str, FloatArray]) -> float:
+    return float(q["u"][0])
+
+
+def _u_max(q: Mapping[str, FloatArray]) -> float:
+    # the half-profile bin nearest the centre (after folding: mean of the two central bins)
+    return float(q["u"][-1])
+
+
+def _delta_095(xi: FloatArray, q: Mapping[str, FloatArray]) -> float:
+    """First distance from the wall where the scaled velocity reaches 0.95 (linear
+    interpolation between bin centres)."""
+    u = q["u"]
+    s = (u - u[0]) / (u[-1] - u[0])
+    above = np.flatnonzero(s >= 0.95)
+    if above.size == 0:
+        return float("nan")
+    j = int(above[0])
+    if j == 0:
+        return float(xi[0])
+    return float(np.interp(0.95, [s[j - 1], s[j]], [xi[j - 1], xi[j]]))
+
+
+def _fit_scaled(xi: FloatArray, q: Mapping[str, FloatArray], W: float) -> tuple[float, float]:
+    """One-parameter least-squares fit of (3.1) to the scaled profile: (delta, rms residual)."""
+    u = q["u"]
+    s = (u - u[0]) / (u[-1] - u[0])
+    if not np.all(np.isfinite(s)):
+        return float("nan"), float("nan")
+
+    def cost(delta: float) -> float:
+        return float(np.sum((s - scaled_profile_31(xi, delta)) ** 2))
+
+    res = optimize.minimize_scalar(cost, bounds=(1e-3 * W, 2.0 * W), method="bounded")
+    return float(res.x), float(math.sqrt(res.fun / s.size))
+
+
+def _fit_full(
+    xi: FloatArray, q: Mapping[str, FloatArray], sigma: FloatArray | None, p0: tuple[float, ...]
+) -> FloatArray:
+    """Three-parameter fit of (3.1) to u(xi): (u_slip, u_max, delta, rms residual)."""
+    u = q["u"]
+    ok = np.isfinite(u)
+    if sigma is not None:
+        ok &= np.isfinite(sigma) & (sigma > 0)
+    if ok.sum() < 4:
+        return np.full(4, np.nan)
+    try:
+        p, _ = optimize.curve_fit(
+            velocity_profile_31,
+            xi[ok],
+            u[ok],
+            p0=p0,
+            sigma=None if sigma is None else sigma[ok],
+            absolute_sigma=True,
+            maxfev=20000,
+        )
+    except (RuntimeError, ValueError):
+        return np.full(4, np.nan)
+    rms = math.sqrt(float(np.mean((u[ok] - velocity_profile_31(xi[ok], *p)) ** 2)))
+    return np.array([p[0], p[1], p[2], rms])
+
+
+@quiet
+def velocity_scaling(prof: ChannelProfiles) -> dict[str, Estimate]:
+    """Section 3.1 quantities, each with a jackknife SE.
+
+    * ``u_slip``: velocity of the wall bin (the paper's definition, "the velocity of the
+      interval closest to the wall");
+    * ``u_max``: velocity at the centre (half-profile bin nearest x = W/2);
+    * ``u_max_over_u_slip`` (paper: 1.37-1.40);
+    * ``delta_095``: distance from the wall (bin centres, linear interpolation) where
+      ``(u - u_slip)/(u_max - u_slip)`` first reaches 0.95.  As in the paper, x is measured
+      from the wall while u_slip is the velocity of the wall bin (centre at 0.75 d for a 1.5 d
+      bin), so a profile that is exactly (3.1) from the wall gives a delta_095 somewhat larger
+      than its delta; the three-parameter fit below is free of that offset;
+    * ``residual_31``: RMS of scaled data minus (3.1) with that delta (no free parameter, as in
+      fig. 4b); ``delta_fit_scaled`` / ``residual_31_fit``: one-parameter least-squares fit of
+      (3.1) to the scaled profile and its RMS residual;
+    * ``u_slip_fit``, ``u_max_fit``, ``delta_fit``, ``residual_fit``: three-parameter fit of
+      (3.1) to u(xi) weighted by the per-bin SE (xi measured from the wall, so ``u_slip_fit`` is
+      the extrapolated velocity at the wall itself);
+    * ``mean_velocity``: width average of the full-channel profile; ``mean_velocity_32``: (3.2)
+      from (u_slip, u_max, delta_095, W); ``mean_velocity_ratio`` = measured / (3.2).
+    """
+    xi, W = prof.xi, prof.W
+    tab = prof.table()
+    u_se = tab["u_se"].to_numpy()
+    sigma = u_se if np.all(np.isfinite(u_se) & (u_se > 0)) else None
+    q0 = prof.derived()
+    d0 = _delta_095(xi, q0)
+    p0 = (_u_slip(q0), _u_max(q0), max(d0, 1e-3 * W) if np.isfinite(d0) else 0.2 * W)
+    width = prof.width_full
+
+    def fn(q: Mapping[str, FloatArray]) -> FloatArray:
+        us, um = _u_slip(q), _u_max(q)
+        dl = _delta_095(xi, q)
+        res31 = (
+            float(np.sqrt(np.mean(((q["u"] - us) / (um - us) - scaled_profile_31(xi, dl)) ** 2)))
+            if np.isfinite(dl)
+            else float("nan")
+        )
+        dfit, rfit = _fit_scaled(xi, q, W)
+        full = _fit_full(xi, q, sigma, p0)
+        return np.array([us, um, um / us, dl, res31, dfit, rfit, *full])
+
+    names = [
+        "u_slip",
+        "u_max",
+        "u_max_over_u_slip",
+        "delta_095",
+        "residual_31",
+        "delta_fit_scaled",
+        "residual_31_fit",
+        "u_slip_fit",
+        "u_max_fit",
+        "delta_fit",
+        "residual_fit",
+    ]
+    val, se = prof.estimate(fn)
+    out = {k: Estimate(float(val[i]), float(se[i])) for i, k in enumerate(names)}
+
+    # mean velocity: needs the full-channel u, so jackknife on the raw means directly
+    def mean_u(m: Mapping[str, FloatArray]) -> FloatArray:
+        u = prof.sign * np.asarray(m["u_y"])
+        q = prof.derived(m)
+        measured = float(np.sum(u * width) / np.sum(width))
+        dl = _delta_095(xi, q)
+        pred = mean_velocity_32(_u_slip(q), _u_max(q), dl, W) if np.isfinite(dl) else np.nan
+        return np.array([measured, pred, measured / pred])
+
+    v0 = mean_u(prof.full)
+    reps = [mean_u({k: v[i] for k, v in prof.loo.items()}) for i in range(prof.n_blocks)]
+    s0 = jackknife_se(v0, reps)
+    for i, k in enumerate(["mean_velocity", "mean_velocity_32", "mean_velocity_ratio"]):
+        out[k] = Estimate(float(v0[i]), float(s0[i]))
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# zones (section 3.2)
+# --------------------------------------------------------------------------------------------
+@dataclass
+class Zones:
+    """The four zones of paper 000 §3.2 on the half profile.
+
+    * wall shearing zone: bins whose centre is within ``wall_width`` (default 2 d) of the wall;
+    * plug: contiguous bins around the centre where ``|du/dx|`` is zero within ``z`` standard
+      errors: scanning outward from the centre, the plug ends where ``min_run`` consecutive
+      bins (default 2) have ``|du/dx| > z SE`` (a single 2-sigma excursion is expected among
+      tens of plug bins; real shear, growing monotonically toward the wall, stays
+      significant);
+    * between them: dense shearing zone where phi >= phi_ad, loose shearing zone where
+      phi < phi_ad, separated at the first crossing of phi = phi_ad met going outward from the
+      plug (linear interpolation; none if phi stays >= phi_ad outside the wall zone, as for
+      phi_bar = 0.62 in the paper).
+
+    ``xi_plug`` is the plug edge (between the last plug bin and the first sheared one),
+    ``xi_ad`` the dense/loose boundary (Estimate, jackknife SE) and ``xi_wall`` the outer edge
+    of the wall zone.
+    """
+
+    labels: list[str]
+    xi_wall: float
+    xi_ad: Estimate
+    xi_plug: float
+    phi_plug: Estimate
+    plug_bins: npt.NDArray[np.int64]
+
+
+def _crossing(xi: FloatArray, phi: FloatArray, i_from: int, i_to: int, phi_ad: float) -> float:
+    """Walk from index i_from down to i_to (outward) and return the interpolated position of
+    the first bin with phi < phi_ad; NaN if none."""
+    for j in range(i_from, i_to - 1, -1):
+        if phi[j] < phi_ad:
+            if j + 1 >= xi.size or not phi[j + 1] >= phi_ad:
+                return float(xi[j])
+            return float(np.interp(phi_ad, [phi[j], phi[j + 1]], [xi[j], xi[j + 1]]))
+    return float("nan")
+
+
+@quiet
+def zones(
+    prof: ChannelProfiles,
+    *,
+    phi_ad: float = PHI_AD,
+    wall_width: float = 2.0,
+    z: float = 2.0,
+    min_run: int = 2,
+) -> Zones:
+    """Split the half profile into plug / dense / loose / wall shearing zones (:class:`Zones`)."""
+    tab = prof.table()
+    xi = prof.xi
+    nb = xi.size
+    gd = tab["gamma_dot"].to_numpy()
+    gd_se = tab["gamma_dot_se"].to_numpy()
+    sig = np.abs(gd) > z * np.where(np.isfinite(gd_se), gd_se, 0.0)
+    wall = xi <= wall_width * prof.d
+    n_wall = int(wall.sum())
+    # plug: from the centre outward until min_run consecutive bins show significant shear (j =
+    # innermost bin of that run; the run may be cut short by the wall zone)
+    j = nb - 1
+    while j >= n_wall and not np.all(sig[max(j - min_run + 1, n_wall) : j + 1]):
+        j -= 1
+    plug_bins = np.arange(j + 1, nb, dtype=np.int64)
+    if plug_bins.size:
+        xi_plug = float(prof.xi_lo[plug_bins[0]])
+    else:
+        xi_plug = float(prof.xi_hi[-1])
+    i_from = j  # first sheared bin from the centre
+    i_to = n_wall
+
+    def cross(q: Mapping[str, FloatArray]) -> float:
+        if i_from < i_to:
+            return float("nan")
+        return _crossing(xi, q["phi"], i_from, i_to, phi_ad)
+
+    xa, xa_se = prof.estimate(cross)
+    labels: list[str] = []
+    in_plug = set(plug_bins.tolist())
+    for b in range(nb):
+        if wall[b]:
+            labels.append("wall")
+        elif b in in_plug:
+            labels.append("plug")
+        elif np.isfinite(xa) and xi[b] < xa:
+            labels.append("loose")
+        else:
+            labels.append("dense")
+    if plug_bins.size:
+        pv, ps = prof.estimate(lambda q: float(np.mean(q["phi"][plug_bins])))
+    else:
+        pv, ps = float("nan"), float("nan")
+    xi_wall = float(prof.xi_hi[n_wall - 1]) if n_wall else 0.0
+    return Zones(
+        labels,
+        xi_wall,
+        Estimate(float(xa), float(xa_se)),
+        xi_plug,
+        Estimate(float(pv), float(ps)),
+        plug_bins,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# rheology in the channel (appendix B)
+# --------------------------------------------------------------------------------------------
+@quiet
+def conduction_length(prof: ChannelProfiles, zn: Zones, *, min_bins: int = 3) -> dict[str, Any]:
+    """Fit (B13) to the plug temperature: ``T = T_c cosh((W/2 - xi)/l_c)^{2/3}`` (zero flux at
+    the centre), weighted by the per-bin SE of T; jackknife SEs of ``l_c`` and ``T_c``.
+
+    Paper 000 §3.2 finds ``l_c ~ 11.5 d``.  Returns l_c, T_c (Estimates), chi2_per_dof, n_bins
+    and ``at_bound`` (True if l_c ran into the upper bound: T flat, l_c undetermined).
+    """
+    idx = zn.plug_bins
+    tab = prof.table()
+    T_se = tab["T_se"].to_numpy()
+    if idx.size < min_bins:
+        nan = Estimate(float("nan"), float("nan"))
+        return {
+            "l_c": nan,
+            "T_c": nan,
+            "chi2_per_dof": float("nan"),
+            "n_bins": int(idx.size),
+            "at_bound": False,
+        }
+    xc = 0.5 * prof.W - prof.xi[idx]
+    sig = T_se[idx]
+    sig = np.where(np.isfinite(sig) & (sig > 0), sig, np.nanmax(np.abs(tab["T"].to_numpy())))
+    upper = 1e3 * prof.W
+
+    def fit(q: Mapping[str, FloatArray]) -> FloatArray:
+        T = q["T"][idx]
+        if not np.all(np.isfinite(T)) or np.all(T <= 0):
+            return np.full(3, np.nan)
+        p0 = (float(T[-1]), 10.0 * prof.d)
+        try:
+            p, _ = optimize.curve_fit(
+                conduction_profile_B13,
+                xc,
+                T,
+                p0=p0,
+                sigma=sig,
+                absolute_sigma=True,
+                bounds=([0.0, 1e-3], [np.inf, upper]),
+                maxfev=20000,
+            )
+        except (RuntimeError, ValueError):
+            return np.full(3, np.nan)
+        chi2 = float(np.sum(((T - conduction_profile_B13(xc, *p)) / sig) ** 2))
+        return np.array([p[0], p[1], chi2 / max(1, T.size - 2)])
+
+    val, se = prof.estimate(fit)
+    return {
+        "l_c": Estimate(float(val[1]), float(se[1])),
+        "T_c": Estimate(float(val[0]), float(se[0])),
+        "chi2_per_dof": float(val[2]),
+        "n_bins": int(idx.size),
+        "at_bound": bool(np.isfinite(val[1]) and val[1] > 0.99 * upper),
+    }
+
+
+@quiet
+def rheology_table(prof: ChannelProfiles, zn: Zones) -> pl.DataFrame:
+    """Per-bin mu(I), phi(I) and kinetic-theory coefficients with SEs, the zone label, and
+    the (B3)/(B4) curves at the measured I (fig. 11, fig. 13)."""
+    tab = prof.table()
+    cols = [
+        "xi",
+        "I",
+        "I_se",
+        "mu",
+        "mu_se",
+        "phi",
+        "phi_se",
+        "p_phi",
+        "p_phi_se",
+        "mu_phi",
+        "mu_phi_se",
+        "D_phi",
+        "D_phi_se",
+        "omega_ratio",
+        "omega_ratio_se",
+        "gamma_over_sqrtT",
+        "gamma_over_sqrtT_se",
+    ]
+    out = tab.select(cols).with_columns(pl.Series("zone", zn.labels))
+    inum = out["I"].to_numpy()
+    return out.with_columns(
+        pl.Series("mu_B3", mu_B3(inum)),
+        pl.Series("phi_B4", phi_B4(inum)),
+        pl.Series("rcp_minus_phi", PHI_RCP - out["phi"].to_numpy()),
+    )
+
+
+@quiet
+def omega_ratio_in_zones(
+    prof: ChannelProfiles, zn: Zones, which: tuple[str, ...] = ("dense", "loose")
+) -> Estimate:
+    """``Omega_z / (du_y/dx)`` over the bins of the given zones, as the least-squares slope of
+    Omega_z against du_y/dx through the origin, ``sum(Omega_z du_y/dx) / sum((du_y/dx)^2)``
+    (a plain mean of per-bin ratios is dominated by the bins where du_y/dx -> 0).  Expected 1/2
+    where the particles rotate with the material: ``Omega_z = omega_z / 2`` with the vorticity
+    ``omega_z = du_y/dx`` of this unidirectional flow (paper 000 §3.2, fig. 9a)."""
+    idx = np.array([i for i, lab in enumerate(zn.labels) if lab in which], dtype=np.int64)
+    if idx.size == 0:
+        return Estimate(float("nan"), float("nan"))
+
+    def slope(q: Mapping[str, FloatArray]) -> float:
+        g, w = q["du_y_dx"][idx], q["w_z"][idx]
+        return float(np.sum(w * g) / np.sum(g * g))
+
+    v, s = prof.estimate(slope)
+    return Estimate(float(v), float(s))
+
+
+@quiet
+def wall_friction(series: TableLike, t_start: float) -> Estimate:
+    """Wall friction coefficient ``|<sigma_xy>| / |<sigma_xx>|`` (fig. 7b) from the wall
+    stresses of the ``series`` table, both walls combined, blocking SE of the ratio."""
+    names = column_names(series)
+    need = [f"wall{w}_sigma_{c}" for w in (0, 1) for c in ("xx", "xy")]
+    if not all(n in names for n in need):
+        return Estimate(float("nan"), float("nan"))
+    t = column(series, "t")
+    keep = t >= t_start
+    cols = {n: column(series, n)[keep] for n in need}
+    num = 0.5 * sum(
+        np.sign(np.mean(cols[f"wall{w}_sigma_xy"])) * cols[f"wall{w}_sigma_xy"] for w in (0, 1)
+    )
+    den = 0.5 * sum(
+        np.sign(np.mean(cols[f"wall{w}_sigma_xx"])) * cols[f"wall{w}_sigma_xx"] for w in (0, 1)
+    )
+    r = ratio_se(num, den, sample_interval(t[keep]))
+    return Estimate(abs(r.mean), r.se)
+
+
+@quiet
+def summary(
+    bins: TableLike,
+    series: TableLike | None = None,
+    *,
+    start_time: float | None = None,
+    symmetrise: bool = True,
+    n_blocks: int | None = None,
+    phi_ad: float = PHI_AD,
+    wall_width: float = 2.0,
+    d: float = 1.0,
+    rho_p: float = 1.0,
+) -> dict[str, Any]:
+    """Everything of paper 000 §3 for one run, with standard errors.
+
+    Keys (scalars are ``{"value", "se"}`` dicts):
+
+    * ``flow_state`` (dict, from ``series``), ``steady`` (t_start, n_windows, n_blocks,
+      block_len, folded, W);
+    * the section 3.1 numbers of :func:`velocity_scaling`;
+    * ``vcm`` (mean |vcm_y| over the steady samples, mass-weighted mean velocity, blocking SE),
+      ``wall_friction``, ``sigma_xx_mean`` and ``sigma_xx_rel_spread`` (max |deviation| /
+      mean over bins: should be ~0 by (B1));
+    * ``zones`` (xi_wall, xi_ad, xi_plug, phi_plug, labels);
+    * ``omega_ratio_shearing`` (dense + loose zones), ``conduction`` ((B13) fit);
+    * ``profile`` (polars DataFrame: half profile, all derived quantities with ``_se`` and a
+      ``zone`` column), ``rheology`` (:func:`rheology_table`), ``profile_errors``
+      (whole-profile relative errors of u_y, phi, T from :func:`errors.profile_se`).
+    """
+    prof = profiles(
+        bins,
+        series,
+        start_time=start_time,
+        symmetrise=symmetrise,
+        n_blocks=n_blocks,
+        d=d,
+        rho_p=rho_p,
+    )
+    out: dict[str, Any] = {}
+    if series is not None and "vcm_y" in column_names(series):
+        out["flow_state"] = asdict(flow_state(series))
+        t = column(series, "t")
+        keep = t >= prof.t_start
+        ms = mean_se(np.abs(column(series, "vcm_y"))[keep], sample_interval(t[keep]))
+        out["vcm"] = {"value": ms.mean, "se": ms.se, "tau": ms.tau, "converged": ms.converged}
+        out["wall_friction"] = wall_friction(series, prof.t_start).as_dict()
+    out["steady"] = {
+        "t_start": prof.t_start,
+        "n_windows": prof.n_windows,
+        "n_blocks": prof.n_blocks,
+        "block_len": prof.block_len,
+        "folded": prof.folded,
+        "W": prof.W,
+    }
+    for k, v in velocity_scaling(prof).items():
+        out[k] = v.as_dict()
+    sv, ss = prof.estimate(lambda q: float(np.mean(q["sigma_xx"])))
+    out["sigma_xx_mean"] = {"value": float(sv), "se": float(ss)}
+    sxx = prof.derived()["sigma_xx"]
+    out["sigma_xx_rel_spread"] = float(np.nanmax(np.abs(sxx - sv)) / abs(sv)) if sv else np.nan
+    zn = zones(prof, phi_ad=phi_ad, wall_width=wall_width)
+    out["zones"] = {
+        "xi_wall": zn.xi_wall,
+        "xi_ad": zn.xi_ad.as_dict(),
+        "xi_plug": zn.xi_plug,
+        "phi_plug": zn.phi_plug.as_dict(),
+        "labels": zn.labels,
+    }
+    out["omega_ratio_shearing"] = omega_ratio_in_zones(prof, zn).as_dict()
+    cond = conduction_length(prof, zn)
+    out["conduction"] = {
+        k: (v.as_dict() if isinstance(v, Estimate) else v) for k, v in cond.items()
+    }
+    out["profile"] = prof.table().with_columns(pl.Series("zone", zn.labels))
+    out["rheology"] = rheology_table(prof, zn)
+    bm = bin_matrix(bins, ["u_y"])
+    tw = bm.t0 if np.all(np.isfinite(bm.t0)) else bm.t_mid
+    start_window = int(np.sum(tw < prof.t_start - 1e-9 * max(1.0, abs(prof.t_start))))
+    pe = profile_se(
+        bins, [c for c in ("u_y", "phi", "T") if c in column_names(bins)], start_window=start_window
+    )
+    out["profile_errors"] = pe.whole
+    return out

@@ -1,0 +1,1093 @@
+"""Statistical error against run time.
+
+Everything here works on *samples* of a time series (one row per sample of a ``series`` table, or
+one window of a ``bins`` table) and never on particles.
+
+Conventions
+-----------
+* ``dt`` is the interval between samples (simulation time units).  For a series sampled every
+  ``dt`` the integrated autocorrelation time is
+  ``tau_int = dt * (1/2 + sum_{k>=1} rho_k)``, so that the variance of the mean of ``n`` samples is
+  ``var(mean) = sigma^2 * (2 tau_int / dt) / n``.  The *statistical inefficiency* is
+  ``g = 2 tau_int / dt = (SE / SE_naive)^2`` where ``SE_naive = sqrt(sigma^2 / (n - 1))`` is the
+  standard error one would quote for uncorrelated samples.  Hence ``tau = g dt / 2``
+  (uncorrelated samples: ``g = 1``, ``tau = dt / 2``).
+* Standard errors come from Flyvbjerg & Petersen blocking (J. Chem. Phys. 91, 461 (1989)):
+  at level ``k`` the series is replaced by means of pairs of the level ``k-1`` series, and
+  ``SE_k^2 = c0_k / (n_k - 1)`` with ``c0_k`` the (biased) variance of the ``n_k`` block means;
+  its own uncertainty is ``SE_k / sqrt(2 (n_k - 1))`` (FP eq. 28-29).
+* The plateau of ``SE_k`` is located automatically with the hypothesis test of Jonsson
+  (Phys. Rev. E 98, 043304 (2018)): level ``j`` is accepted when
+  ``M_j = sum_{k>=j} n_k (gamma_k / c0_k)^2`` (``gamma_k`` the lag-1 autocovariance of the level-k
+  block means) is below the ``1 - alpha`` quantile of chi-squared with (number of levels - j)
+  degrees of freedom, i.e. when the remaining block means show no significant lag-1 correlation;
+  in addition the level's own term ``n_j (gamma_j / c0_j)^2`` must be below the one-degree
+  quantile.  The first accepted level is the plateau.  Since the test has little power with few
+  blocks, the result is flagged ``converged=False`` (the series is too short for the blocking to
+  *reach* a plateau and the SE is probably an underestimate) unless both
+
+  1. the plateau level has at least ``min_blocks`` blocks (default 20, i.e. a 16 % uncertainty
+     of the SE itself), and
+  2. the plateau block length ``b = 2^k`` is at least ``4 (g - 1)`` samples.  For a block length
+     ``b`` the variance of the mean estimated from the block means is short by about
+     ``(g - 1) / (2 b)`` (AR(1) process), so this keeps the low bias of the SE below ~6 %.
+
+  Because Jonsson's test at ``alpha = 0.01`` accepts levels whose blocks still carry a little
+  correlation (SE ~5-10 % low for long series), the reported level is the first level at or
+  above Jonsson's with ``b >= 8 (g_J - 1)`` (``g_J`` the inefficiency at Jonsson's level) and at
+  least ``min_blocks`` blocks (bias ~3 %); if there is none, Jonsson's level is reported.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple, ParamSpec, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+import polars as pl
+from scipy import stats
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+#: Anything :func:`as_columns` understands: ``pyarrow.Table`` / ``RecordBatch``,
+#: ``polars.DataFrame``, a mapping of column name -> 1-D array, or a pandas-like frame.
+TableLike = Any
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def quiet(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+    """Run ``fn`` under ``np.errstate(all="ignore")`` with numpy's RuntimeWarnings (empty
+    slices, invalid values) silenced: analysis code lets NaN/inf propagate and must not trip a
+    global ``np.seterr(all="raise")`` (e.g. on harmless underflow)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+DEFAULT_MIN_BLOCKS = 20
+DEFAULT_ALPHA = 0.01
+DEFAULT_FRACTIONS: tuple[float, ...] = (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# table helpers
+# --------------------------------------------------------------------------------------------
+def column_names(data: TableLike) -> list[str]:
+    """Column names of a pyarrow table, polars frame, mapping or pandas-like frame."""
+    if hasattr(data, "column_names"):  # pyarrow Table / RecordBatch
+        return list(data.column_names)
+    if isinstance(data, pl.DataFrame):
+        return list(data.columns)
+    if isinstance(data, Mapping):
+        return [str(k) for k in data.keys()]
+    if hasattr(data, "columns"):
+        return [str(c) for c in data.columns]
+    raise TypeError(f"unsupported table type {type(data)!r}")
+
+
+def column(data: TableLike, name: str) -> FloatArray:
+    """One column as a float64 numpy array (nulls become NaN)."""
+    if hasattr(data, "column_names"):
+        arr = data.column(name).to_numpy()
+    elif isinstance(data, pl.DataFrame):
+        arr = data.get_column(name).to_numpy()
+    elif isinstance(data, Mapping):
+        arr = data[name]
+    elif hasattr(data, "columns"):
+        arr = data[name]
+    else:
+        raise TypeError(f"unsupported table type {type(data)!r}")
+    return np.asarray(arr, dtype=np.float64)
+
+
+def as_columns(data: TableLike, columns: Sequence[str] | None = None) -> dict[str, FloatArray]:
+    """Convert a table (pyarrow / polars / dict of arrays / pandas-like) to a dict of float arrays.
+
+    Parameters
+    ----------
+    data
+        The table.
+    columns
+        Columns to extract (default: all).
+    """
+    names = list(columns) if columns is not None else column_names(data)
+    return {c: column(data, c) for c in names}
+
+
+def to_polars(data: TableLike) -> pl.DataFrame:
+    """Any supported table as a polars DataFrame (keeps text columns, unlike :func:`as_columns`)."""
+    if isinstance(data, pl.DataFrame):
+        return data
+    if hasattr(data, "column_names"):
+        out = pl.from_arrow(data)
+        return out if isinstance(out, pl.DataFrame) else out.to_frame()
+    if isinstance(data, Mapping):
+        return pl.DataFrame({str(k): np.asarray(v) for k, v in data.items()})
+    return pl.from_pandas(data)
+
+
+def sample_interval(t: npt.ArrayLike) -> float:
+    """Median spacing of a sample-time array (1.0 if fewer than two samples)."""
+    tt = np.asarray(t, dtype=np.float64)
+    if tt.size < 2:
+        return 1.0
+    return float(np.median(np.diff(tt)))
+
+
+# --------------------------------------------------------------------------------------------
+# Flyvbjerg-Petersen blocking
+# --------------------------------------------------------------------------------------------
+@dataclass
+class BlockingResult:
+    """Blocking analysis of one series (see module docstring for the definitions).
+
+    Attributes
+    ----------
+    mean, se, se_err
+        Sample mean, plateau standard error of the mean and the uncertainty of that SE.
+    se_naive
+        SE assuming uncorrelated samples (level 0).
+    g
+        Statistical inefficiency ``(se / se_naive)^2``.
+    tau
+        Integrated autocorrelation time ``g dt / 2`` in the units of ``dt``.
+    level, block_size, n_blocks
+        Plateau level, its block length (samples) and number of blocks.
+    n
+        Number of (finite) samples.
+    converged
+        False if the series is too short for the blocking to reach a plateau.
+    levels
+        Per-level table: level, block_size, n_blocks, se, se_err, lag1 (lag-1 autocorrelation of
+        the block means), M (Jonsson statistic), threshold (chi-squared quantile), accepted.
+    """
+
+    mean: float
+    se: float
+    se_err: float
+    se_naive: float
+    g: float
+    tau: float
+    level: int
+    block_size: int
+    n_blocks: int
+    n: int
+    converged: bool
+    levels: pl.DataFrame = field(repr=False)
+
+
+@dataclass
+class BlockingArrays:
+    """Vectorised blocking result for ``m`` series of equal length (one entry per series)."""
+
+    mean: FloatArray
+    se: FloatArray
+    se_err: FloatArray
+    se_naive: FloatArray
+    g: FloatArray
+    tau: FloatArray
+    level: IntArray
+    n_blocks: IntArray
+    n: IntArray
+    converged: npt.NDArray[np.bool_]
+
+
+def _levels_2d(x: FloatArray) -> tuple[list[int], FloatArray, FloatArray, FloatArray]:
+    """Blocking transformation of the columns of ``x`` (n, m), all finite.
+
+    Returns the block counts n_k and arrays (K, m) of mean, c0 (biased variance) and gamma
+    (biased lag-1 autocovariance, Jonsson's definition) of the level-k block means.
+    """
+    nks: list[int] = []
+    means: list[FloatArray] = []
+    c0s: list[FloatArray] = []
+    c1s: list[FloatArray] = []
+    while x.shape[0] >= 2:
+        n = x.shape[0]
+        mu = x.mean(axis=0)
+        dev = x - mu
+        nks.append(n)
+        means.append(mu)
+        c0s.append(np.mean(dev * dev, axis=0))
+        c1s.append(np.sum(dev[:-1] * dev[1:], axis=0) / n)
+        half = n // 2
+        x = 0.5 * (x[0 : 2 * half : 2] + x[1 : 2 * half : 2])
+    return nks, np.array(means), np.array(c0s), np.array(c1s)
+
+
+def _blocking_finite(
+    x: FloatArray, dt: float, alpha: float, min_blocks: int
+) -> tuple[BlockingArrays, list[int], FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Blocking of the finite (n, m) array ``x``; see :func:`blocking_many`."""
+    n, m = x.shape
+    if n < 2:
+        nan = np.full(m, np.nan)
+        mean = x.mean(axis=0) if n == 1 else nan
+        res = BlockingArrays(
+            mean=np.asarray(mean, dtype=np.float64),
+            se=nan,
+            se_err=nan,
+            se_naive=nan,
+            g=nan,
+            tau=nan,
+            level=np.zeros(m, np.int64),
+            n_blocks=np.full(m, n, np.int64),
+            n=np.full(m, n, np.int64),
+            converged=np.zeros(m, bool),
+        )
+        empty = np.zeros((0, m))
+        return res, [], empty, empty, empty, empty
+    nks, _means, c0, c1 = _levels_2d(x)
+    nk = np.asarray(nks, dtype=np.float64)[:, None]
+    n_levels = len(nks)
+    se_k = np.sqrt(c0 / (nk - 1.0))
+    se_err_k = se_k / np.sqrt(2.0 * (nk - 1.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.where(c0 > 0, c1 / c0, 0.0)
+    terms = nk * rho**2
+    big_m = np.cumsum(terms[::-1], axis=0)[::-1]  # M_j = sum_{k>=j} n_k rho_k^2
+    dof = n_levels - np.arange(n_levels)
+    thresh = stats.chi2.ppf(1.0 - alpha, dof)[:, None]
+    # Jonsson's global test, plus the same test on the level's own lag-1 correlation (the sum
+    # over many levels dilutes a single clearly correlated level when the series is short)
+    accepted = (big_m < thresh) & (terms < stats.chi2.ppf(1.0 - alpha, 1))
+    accepted[-1, :] = True  # the last level is always (trivially) acceptable
+    k_jonsson = np.argmax(accepted, axis=0)
+    se_naive = se_k[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g_k = np.where(se_naive > 0, (se_k / se_naive) ** 2, 1.0)
+    blk = (2.0 ** np.arange(n_levels))[:, None]
+    # refinement: first level >= Jonsson's whose blocks are long enough for a small bias, with
+    # the block length required from g at Jonsson's level (re-evaluating g at every level would
+    # chase upward noise of the SE)
+    g_j = g_k[k_jonsson, np.arange(m)]
+    good = (
+        (np.arange(n_levels)[:, None] >= k_jonsson[None, :])
+        & (blk >= 8.0 * (g_j[None, :] - 1.0))
+        & (nk >= min_blocks)
+    )
+    level = np.where(good.any(axis=0), np.argmax(good, axis=0), k_jonsson).astype(np.int64)
+    cols = np.arange(m)
+    se = se_k[level, cols]
+    se_err = se_err_k[level, cols]
+    g = g_k[level, cols]
+    n_blocks = np.asarray(nks, dtype=np.int64)[level]
+    res = BlockingArrays(
+        mean=x.mean(axis=0),
+        se=se,
+        se_err=se_err,
+        se_naive=se_naive,
+        g=g,
+        tau=0.5 * g * dt,
+        level=level,
+        n_blocks=n_blocks,
+        n=np.full(m, n, np.int64),
+        converged=(n_blocks >= min_blocks) & (2.0**level >= 4.0 * (g - 1.0)),
+    )
+    return res, nks, se_k, se_err_k, rho, np.concatenate([big_m, thresh], axis=1)
+
+
+@quiet
+def blocking_many(
+    x: npt.ArrayLike,
+    dt: float = 1.0,
+    *,
+    alpha: float = DEFAULT_ALPHA,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+) -> BlockingArrays:
+    """Flyvbjerg-Petersen blocking of every column of a 2-D array (samples x series).
+
+    Vectorised over the columns; columns containing NaN are analysed separately on their finite
+    samples (NaN samples are dropped, which is only appropriate if they are rare).
+
+    Parameters
+    ----------
+    x
+        Array of shape (n_samples, n_series) (a 1-D array is treated as one series).
+    dt
+        Sample interval, used for ``tau = g dt / 2``.
+    alpha
+        Significance level of Jonsson's plateau test.
+    min_blocks
+        Minimum number of blocks at the plateau level for ``converged=True``.
+    """
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    finite = np.isfinite(arr)
+    good = finite.all(axis=0)
+    out, *_ = _blocking_finite(arr[:, good], dt, alpha, min_blocks)
+    if good.all():
+        return out
+    m = arr.shape[1]
+    res = BlockingArrays(
+        mean=np.full(m, np.nan),
+        se=np.full(m, np.nan),
+        se_err=np.full(m, np.nan),
+        se_naive=np.full(m, np.nan),
+        g=np.full(m, np.nan),
+        tau=np.full(m, np.nan),
+        level=np.zeros(m, np.int64),
+        n_blocks=np.zeros(m, np.int64),
+        n=np.zeros(m, np.int64),
+        converged=np.zeros(m, bool),
+    )
+    names = ("mean", "se", "se_err", "se_naive", "g", "tau", "level", "n_blocks", "n", "converged")
+    for name in names:
+        getattr(res, name)[good] = getattr(out, name)
+    for j in np.flatnonzero(~good):  # loop over series (bins), never over particles
+        col = arr[finite[:, j], j][:, None]
+        one, *_ = _blocking_finite(col, dt, alpha, min_blocks)
+        for name in names:
+            getattr(res, name)[j] = getattr(one, name)[0]
+    return res
+
+
+@quiet
+def blocking(
+    series: npt.ArrayLike,
+    dt: float = 1.0,
+    *,
+    alpha: float = DEFAULT_ALPHA,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+) -> BlockingResult:
+    """Flyvbjerg-Petersen blocking analysis of one series with automatic plateau detection.
+
+    Implements FP (1989) eqs. 20-29 (block transformation, SE per level and its uncertainty) and
+    Jonsson's (2018) plateau criterion; see the module docstring.  NaN samples are dropped.
+
+    Parameters
+    ----------
+    series
+        1-D samples, equally spaced in time.
+    dt
+        Sample interval (for ``tau``).
+    alpha, min_blocks
+        Plateau-test level and the minimum number of plateau blocks for ``converged``.
+    """
+    x = np.asarray(series, dtype=np.float64).ravel()
+    x = x[np.isfinite(x)]
+    res, nks, se_k, se_err_k, rho, mt = _blocking_finite(x[:, None], dt, alpha, min_blocks)
+    k = len(nks)
+    levels = pl.DataFrame(
+        {
+            "level": np.arange(k, dtype=np.int64),
+            "block_size": (2 ** np.arange(k)).astype(np.int64),
+            "n_blocks": np.asarray(nks, dtype=np.int64),
+            "se": se_k[:, 0] if k else np.zeros(0),
+            "se_err": se_err_k[:, 0] if k else np.zeros(0),
+            "lag1": rho[:, 0] if k else np.zeros(0),
+            "M": mt[:, 0] if k else np.zeros(0),
+            "threshold": mt[:, 1] if k else np.zeros(0),
+        }
+    ).with_columns((pl.col("M") < pl.col("threshold")).alias("accepted"))
+    lev = int(res.level[0])
+    return BlockingResult(
+        mean=float(res.mean[0]),
+        se=float(res.se[0]),
+        se_err=float(res.se_err[0]),
+        se_naive=float(res.se_naive[0]),
+        g=float(res.g[0]),
+        tau=float(res.tau[0]),
+        level=lev,
+        block_size=2**lev,
+        n_blocks=int(res.n_blocks[0]),
+        n=int(x.size),
+        converged=bool(res.converged[0]),
+        levels=levels,
+    )
+
+
+class MeanSE(NamedTuple):
+    """``(mean, se, tau, converged, n)`` of a series (a tuple with names)."""
+
+    mean: float
+    se: float
+    tau: float
+    converged: bool
+    n: int
+
+
+@quiet
+def mean_se(
+    series: npt.ArrayLike,
+    dt: float = 1.0,
+    *,
+    alpha: float = DEFAULT_ALPHA,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+) -> MeanSE:
+    """Mean, blocking standard error, integrated correlation time ``tau = g dt / 2``,
+    convergence flag and sample count of a series (see :func:`blocking`)."""
+    b = blocking(series, dt, alpha=alpha, min_blocks=min_blocks)
+    return MeanSE(b.mean, b.se, b.tau, b.converged, b.n)
+
+
+@quiet
+def ratio_se(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    dt: float = 1.0,
+    *,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+) -> MeanSE:
+    """Ratio of means ``r = <a>/<b>`` with its SE from blocking the linearised series
+    ``z_i = (a_i - r b_i) / <b>`` (delta method; keeps the a-b cross-correlation)."""
+    aa = np.asarray(a, dtype=np.float64)
+    bb = np.asarray(b, dtype=np.float64)
+    ok = np.isfinite(aa) & np.isfinite(bb)
+    aa, bb = aa[ok], bb[ok]
+    mb = float(np.mean(bb))
+    r = float(np.mean(aa)) / mb
+    z = (aa - r * bb) / mb
+    blk = blocking(z, dt, min_blocks=min_blocks)
+    return MeanSE(r, blk.se, blk.tau, blk.converged, blk.n)
+
+
+# --------------------------------------------------------------------------------------------
+# trend test and steady-state detection
+# --------------------------------------------------------------------------------------------
+@dataclass
+class Trend:
+    """Least-squares straight line ``x = a + slope t`` with a correlation-corrected slope SE.
+
+    ``slope_se`` is the OLS slope error inflated by ``sqrt(g)`` of the residuals (their
+    statistical inefficiency from blocking), ``t_stat = slope / slope_se`` and ``rel_drift`` is
+    ``slope * (t_end - t_start) / |mean|`` (relative change across the fitted interval).
+    """
+
+    slope: float
+    slope_se: float
+    t_stat: float
+    mean: float
+    std: float
+    rel_drift: float
+    duration: float
+
+
+@quiet
+def trend(t: npt.ArrayLike, x: npt.ArrayLike) -> Trend:
+    """Linear trend of ``x(t)`` with a slope SE that accounts for serial correlation."""
+    tt = np.asarray(t, dtype=np.float64)
+    xx = np.asarray(x, dtype=np.float64)
+    ok = np.isfinite(tt) & np.isfinite(xx)
+    tt, xx = tt[ok], xx[ok]
+    n = tt.size
+    if n < 3:
+        return Trend(
+            np.nan, np.nan, np.nan, float(np.mean(xx)) if n else np.nan, np.nan, np.nan, 0.0
+        )
+    tc = tt - tt.mean()
+    sxx = float(np.sum(tc * tc))
+    mean = float(xx.mean())
+    slope = float(np.sum(tc * (xx - mean)) / sxx)
+    resid = xx - mean - slope * tc
+    s2 = float(np.sum(resid**2) / (n - 2))
+    g = blocking(resid).g if n >= 8 else 1.0
+    g = max(g, 1.0) if np.isfinite(g) else 1.0
+    slope_se = math.sqrt(s2 / sxx * g)
+    duration = float(tt[-1] - tt[0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_stat = slope / slope_se if slope_se > 0 else (np.inf if slope else 0.0)
+        rel = slope * duration / abs(mean) if mean != 0 else np.inf
+    return Trend(slope, slope_se, float(t_stat), mean, float(xx.std()), float(rel), duration)
+
+
+@dataclass
+class SteadyStart:
+    """End of the initial transient.
+
+    Attributes
+    ----------
+    index, t_start
+        First steady sample and its time.
+    settled
+        False when the MSER minimum sits on the edge of the search range (the transient may
+        not be over; also the case for a drifting, e.g. accelerating, series).
+    criterion
+        Text description of the rule used.
+    mser
+        MSER statistic per candidate truncation (in batches).
+    """
+
+    index: int
+    t_start: float
+    settled: bool
+    criterion: str
+    mser: FloatArray = field(repr=False)
+
+
+@quiet
+def steady_state_start(
+    t: npt.ArrayLike,
+    series: npt.ArrayLike,
+    *,
+    batch: int = 5,
+    max_fraction: float = 0.5,
+) -> SteadyStart:
+    """Detect the end of the start-up transient with the MSER-m rule.
+
+    MSER (White 1997; MSER-5 of White, Cobb & Spratt 2000): form means ``z_j`` of ``batch``
+    consecutive samples; for every truncation ``d`` (in batches) up to ``max_fraction`` of the
+    series compute ``MSER(d) = sum_{j>=d} (z_j - zbar_d)^2 / (N_b - d)^2`` (squared standard
+    error of the truncated mean, uncorrelated estimate) and choose the ``d`` minimising it:
+    dropping more data only pays while the removed samples bias the mean more than the loss of
+    samples inflates its error.  If the minimum is at the largest allowed ``d`` the series is
+    flagged ``settled=False``.
+
+    Parameters
+    ----------
+    t, series
+        Sample times and values (same length).
+    batch
+        Batch size m of MSER-m.
+    max_fraction
+        Largest fraction of the series that may be discarded.
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    xx = np.asarray(series, dtype=np.float64)
+    if tt.shape != xx.shape:
+        raise ValueError("t and series must have the same shape")
+    ok = np.isfinite(xx)
+    idx_ok = np.flatnonzero(ok)
+    crit = f"MSER-{batch}, truncation <= {max_fraction:g} of the series"
+    if idx_ok.size == 0:
+        return SteadyStart(0, float(tt[0]) if tt.size else np.nan, False, crit, np.zeros(0))
+    x = xx[ok]
+    nb = x.size // batch
+    if nb < 4:
+        return SteadyStart(int(idx_ok[0]), float(tt[idx_ok[0]]), False, crit, np.zeros(0))
+    z = x[: nb * batch].reshape(nb, batch).mean(axis=1)
+    z = z - z.mean()
+    s1 = np.cumsum(z[::-1])[::-1]
+    s2 = np.cumsum((z * z)[::-1])[::-1]
+    cnt = nb - np.arange(nb, dtype=np.float64)
+    ss = np.clip(s2 - s1 * s1 / cnt, 0.0, None)
+    mser = ss / cnt**2
+    dmax = max(1, int(math.floor(max_fraction * nb)))
+    d = int(np.argmin(mser[: dmax + 1]))
+    settled = d < dmax
+    first = int(idx_ok[d * batch])
+    return SteadyStart(first, float(tt[first]), bool(settled), crit, mser[: dmax + 1])
+
+
+@quiet
+def steady_state_start_multi(
+    t: npt.ArrayLike, columns: Mapping[str, npt.ArrayLike], **kwargs: Any
+) -> SteadyStart:
+    """Steady start common to several observables: the latest of their MSER starts;
+    ``settled`` only if every observable settled."""
+    starts = {k: steady_state_start(t, v, **kwargs) for k, v in columns.items()}
+    if not starts:
+        raise ValueError("no columns given")
+    last = max(starts.values(), key=lambda s: s.index)
+    settled = all(s.settled for s in starts.values())
+    crit = last.criterion + "; latest over " + ", ".join(starts)
+    return SteadyStart(last.index, last.t_start, settled, crit, last.mser)
+
+
+# --------------------------------------------------------------------------------------------
+# SE against averaging time
+# --------------------------------------------------------------------------------------------
+@dataclass
+class SEvsTime:
+    """Standard error against averaging time, with the fit ``SE = C / sqrt(T)``.
+
+    Attributes
+    ----------
+    table
+        Columns: fraction, n, T (simulated averaging time), wall_time (or null), mean, se,
+        se_err, tau, converged.
+    C, C_err
+        Prefactor of ``SE = C / sqrt(T)`` fitted on the converged rows (weighted geometric mean
+        of ``se sqrt(T)``, weights ``(se / se_err)^2``).  The rows use nested prefixes of the
+        same data, so ``C_err`` is optimistic; the last row dominates the fit anyway.
+    exponent, exponent_err
+        Free log-log slope of SE vs T over converged rows (should be close to -1/2).
+    wall_time_per_unit_t
+        Wall-clock seconds per unit of simulated time (if known).
+    t_start
+        Time at which the steady part (used here) starts.
+    too_short
+        True if the full-length estimate did not converge or fewer than two rows converged.
+    """
+
+    table: pl.DataFrame
+    C: float
+    C_err: float
+    exponent: float
+    exponent_err: float
+    wall_time_per_unit_t: float | None
+    t_start: float
+    too_short: bool
+    message: str = ""
+
+    @quiet
+    def predict_se(self, T: npt.ArrayLike) -> FloatArray:
+        """``C / sqrt(T)``."""
+        return self.C / np.sqrt(np.asarray(T, dtype=np.float64))
+
+    @quiet
+    def time_to_reach(self, target_se: float) -> dict[str, Any]:
+        """Simulated (and wall-clock) averaging time needed for ``SE = target_se``.
+
+        Returns a dict with ``T`` (total steady averaging time), ``T_more`` (beyond what was
+        simulated), ``wall_time`` / ``wall_time_more`` (None if the wall rate is unknown) and
+        ``reliable`` (False when the data were too short for a converged estimate).
+        """
+        T = (self.C / target_se) ** 2
+        T_have = float(self.table["T"].max()) if self.table.height else 0.0
+        more = max(0.0, T - T_have)
+        w = self.wall_time_per_unit_t
+        return {
+            "T": T,
+            "T_more": more,
+            "wall_time": None if w is None else T * w,
+            "wall_time_more": None if w is None else more * w,
+            "reliable": not self.too_short and math.isfinite(T),
+        }
+
+
+def _fit_inverse_sqrt(
+    T: FloatArray, se: FloatArray, se_err: FloatArray, ok: npt.NDArray[np.bool_]
+) -> tuple[float, float, float, float]:
+    """C, C_err (geometric weighted mean of se sqrt(T)) and the free log-log slope."""
+    use = ok & np.isfinite(se) & (se > 0) & np.isfinite(T) & (T > 0)
+    if not use.any():
+        use = np.isfinite(se) & (se > 0) & (T > 0)
+    if not use.any():
+        return np.nan, np.nan, np.nan, np.nan
+    logc = np.log(se[use]) + 0.5 * np.log(T[use])
+    rel = np.where(se_err[use] > 0, se_err[use] / se[use], 1.0)
+    w = 1.0 / rel**2
+    lc = float(np.sum(w * logc) / np.sum(w))
+    C = math.exp(lc)
+    C_err = C * math.sqrt(1.0 / float(np.sum(w)))
+    expo, expo_err = np.nan, np.nan
+    if np.unique(T[use]).size >= 2:
+        lt, ls = np.log(T[use]), np.log(se[use])
+        A = np.vstack([np.ones_like(lt), lt]).T
+        sw = np.sqrt(w)
+        coef, *_ = np.linalg.lstsq(A * sw[:, None], ls * sw, rcond=None)
+        cov = np.linalg.pinv((A * w[:, None]).T @ A)
+        expo, expo_err = float(coef[1]), float(math.sqrt(max(cov[1, 1], 0.0)))
+    return C, C_err, expo, expo_err
+
+
+@quiet
+def se_vs_time(
+    t: npt.ArrayLike,
+    series: npt.ArrayLike,
+    wall_time_per_unit_t: float | None = None,
+    fractions: Sequence[float] = DEFAULT_FRACTIONS,
+    *,
+    start: int | None = None,
+    dt: float | None = None,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+) -> SEvsTime:
+    """SE of the mean computed from the first fraction ``f`` of the steady samples vs ``T``.
+
+    ``T = n_f dt`` is the simulated averaging time of the first ``n_f`` steady samples; the
+    wall time is ``T * wall_time_per_unit_t`` if given.  The steady part starts at ``start``
+    (sample index) or, by default, at :func:`steady_state_start`.  Then ``SE ~ C / sqrt(T)`` is
+    fitted and :meth:`SEvsTime.time_to_reach` extrapolates.
+
+    Parameters
+    ----------
+    t, series
+        Sample times and values.
+    wall_time_per_unit_t
+        Wall-clock seconds per unit simulated time (optional).
+    fractions
+        Fractions of the steady samples to use (values in (0, 1]).
+    start
+        First steady sample (default: automatic).
+    dt
+        Sample interval (default: median spacing of ``t``).
+    min_blocks
+        Convergence requirement passed to :func:`blocking`.
+    """
+    tt = np.asarray(t, dtype=np.float64)
+    xx = np.asarray(series, dtype=np.float64)
+    if start is None:
+        start = steady_state_start(tt, xx).index
+    dts = sample_interval(tt) if dt is None else float(dt)
+    ts, xs = tt[start:], xx[start:]
+    rows: list[dict[str, Any]] = []
+    for f in sorted(set(float(v) for v in fractions)):
+        n_f = int(round(f * xs.size))
+        if n_f < 2:
+            continue
+        b = blocking(xs[:n_f], dts, min_blocks=min_blocks)
+        T = n_f * dts
+        rows.append(
+            {
+                "fraction": f,
+                "n": n_f,
+                "T": T,
+                "wall_time": None if wall_time_per_unit_t is None else T * wall_time_per_unit_t,
+                "mean": b.mean,
+                "se": b.se,
+                "se_err": b.se_err,
+                "tau": b.tau,
+                "converged": b.converged,
+            }
+        )
+    return _se_table_result(rows, wall_time_per_unit_t, float(ts[0]) if ts.size else np.nan)
+
+
+@quiet
+def _se_table_result(rows: list[dict[str, Any]], wall: float | None, t_start: float) -> SEvsTime:
+    schema = {
+        "fraction": pl.Float64,
+        "n": pl.Int64,
+        "T": pl.Float64,
+        "wall_time": pl.Float64,
+        "mean": pl.Float64,
+        "se": pl.Float64,
+        "se_err": pl.Float64,
+        "tau": pl.Float64,
+        "converged": pl.Boolean,
+    }
+    table = pl.DataFrame(rows, schema=schema)
+    if table.height == 0:
+        return SEvsTime(
+            table, np.nan, np.nan, np.nan, np.nan, wall, t_start, True, "no steady samples"
+        )
+    T = table["T"].to_numpy()
+    se = table["se"].to_numpy()
+    se_err = table["se_err"].to_numpy()
+    conv = table["converged"].to_numpy()
+    C, C_err, ex, ex_err = _fit_inverse_sqrt(T, se, se_err, conv)
+    too_short = (not bool(conv[-1])) or int(conv.sum()) < 2
+    msg = ""
+    if too_short:
+        msg = (
+            "data too short: blocking did not reach a plateau "
+            f"({int(conv.sum())}/{conv.size} prefixes converged); C and times are rough"
+        )
+    return SEvsTime(table, C, C_err, ex, ex_err, wall, t_start, too_short, msg)
+
+
+# --------------------------------------------------------------------------------------------
+# binned profiles: windows are the samples
+# --------------------------------------------------------------------------------------------
+@dataclass
+class BinMatrix:
+    """A ``bins`` table pivoted to (window, bin) matrices.
+
+    Attributes
+    ----------
+    window
+        Window indices (sorted), length n_w.
+    t_mid, t0, t1
+        Window mid/start/end times.
+    n_samples
+        Samples per window (weights), float.
+    bin, x, x_lo, x_hi
+        Bin indices and geometry (length n_b).
+    data
+        Column name -> (n_w, n_b) array (NaN where a (window, bin) row is missing).
+    """
+
+    window: IntArray
+    t_mid: FloatArray
+    t0: FloatArray
+    t1: FloatArray
+    n_samples: FloatArray
+    bin: IntArray
+    x: FloatArray
+    x_lo: FloatArray
+    x_hi: FloatArray
+    data: dict[str, FloatArray]
+
+    @property
+    def dt(self) -> float:
+        """Window length (median), the sample interval of the window series."""
+        if self.t1.size and np.all(np.isfinite(self.t1 - self.t0)):
+            return float(np.median(self.t1 - self.t0))
+        return sample_interval(self.t_mid)
+
+    def select(self, keep: npt.NDArray[np.bool_]) -> BinMatrix:
+        """Subset of windows."""
+        return BinMatrix(
+            self.window[keep],
+            self.t_mid[keep],
+            self.t0[keep],
+            self.t1[keep],
+            self.n_samples[keep],
+            self.bin,
+            self.x,
+            self.x_lo,
+            self.x_hi,
+            {k: v[keep] for k, v in self.data.items()},
+        )
+
+
+@quiet
+def bin_matrix(bins: TableLike, columns: Sequence[str] | None = None) -> BinMatrix:
+    """Pivot a ``bins`` table (docs/columns.md, channel) into (window, bin) matrices.
+
+    Only ``window`` and ``bin`` are required; ``t0``/``t1``, ``n_samples``, ``x``/``x_lo``/
+    ``x_hi`` are used when present.  ``columns`` defaults to every other numeric column.
+    """
+    names = column_names(bins)
+    w_raw = column(bins, "window").astype(np.int64)
+    b_raw = column(bins, "bin").astype(np.int64)
+    windows, wi = np.unique(w_raw, return_inverse=True)
+    bidx, bi = np.unique(b_raw, return_inverse=True)
+    nw, nb = windows.size, bidx.size
+    meta = {"window", "bin", "t0", "t1", "n_samples", "x", "x_lo", "x_hi"}
+    if columns is None:
+        columns = [c for c in names if c not in meta]
+
+    def per_window(name: str, default: float) -> FloatArray:
+        out = np.full(nw, default)
+        if name in names:
+            out[wi] = column(bins, name)
+        return out
+
+    def per_bin(name: str) -> FloatArray:
+        out = np.full(nb, np.nan)
+        if name in names:
+            out[bi] = column(bins, name)
+        return out
+
+    t0 = per_window("t0", np.nan)
+    t1 = per_window("t1", np.nan)
+    t_mid = 0.5 * (t0 + t1)
+    if not np.all(np.isfinite(t_mid)):
+        t_mid = windows.astype(np.float64)
+    x_lo, x_hi, x = per_bin("x_lo"), per_bin("x_hi"), per_bin("x")
+    if not np.all(np.isfinite(x)):
+        x = 0.5 * (x_lo + x_hi) if np.all(np.isfinite(x_lo + x_hi)) else bidx.astype(float)
+    data: dict[str, FloatArray] = {}
+    for c in columns:
+        if c not in names:
+            continue
+        mat = np.full((nw, nb), np.nan)
+        mat[wi, bi] = column(bins, c)
+        data[c] = mat
+    return BinMatrix(
+        windows, t_mid, t0, t1, per_window("n_samples", 1.0), bidx, x, x_lo, x_hi, data
+    )
+
+
+@quiet
+def window_steady_start(bm: BinMatrix, col: str = "u_y") -> SteadyStart:
+    """Steady start of a ``bins`` table from the per-window spatial mean of ``col``
+    (default the velocity, whose development is the slowest), by :func:`steady_state_start`
+    with batch size 1 (windows are already averages)."""
+    key = col if col in bm.data else next(iter(bm.data))
+    s = np.nanmean(bm.data[key], axis=1)
+    return steady_state_start(bm.t0 if np.all(np.isfinite(bm.t0)) else bm.t_mid, s, batch=1)
+
+
+@dataclass
+class ProfileErrors:
+    """Per-bin blocking errors of binned profiles.
+
+    Attributes
+    ----------
+    table
+        One row per bin: bin, x, and for each column c: c, c_se, c_se_err, c_tau, c_converged.
+    whole
+        Per column: ``rms_se`` (RMS over bins of the SE), ``scale`` (RMS of the mean profile),
+        ``rel_error = rms_se / scale`` (the profile-as-a-whole relative error),
+        ``frac_converged`` and ``max_rel_se``.
+    t_start, n_windows, dt
+        Steady start, number of windows used and window length.
+    """
+
+    table: pl.DataFrame
+    whole: dict[str, dict[str, float]]
+    t_start: float
+    n_windows: int
+    dt: float
+
+
+def _rms_profile(b: BlockingArrays) -> tuple[float, float, float, float]:
+    """Whole-profile numbers: rms SE, its error, profile scale, converged fraction."""
+    se, err, mean = b.se, b.se_err, b.mean
+    ok = np.isfinite(se)
+    if not ok.any():
+        return np.nan, np.nan, np.nan, 0.0
+    rms = float(np.sqrt(np.mean(se[ok] ** 2)))
+    rms_err = float(np.sqrt(np.sum((se[ok] * err[ok]) ** 2)) / (ok.sum() * rms)) if rms else 0.0
+    scale = float(np.sqrt(np.nanmean(mean**2)))
+    return rms, rms_err, scale, float(np.mean(b.converged))
+
+
+@quiet
+def profile_se(
+    bins: TableLike,
+    columns: Sequence[str] = ("u_y", "phi", "T"),
+    *,
+    start_window: int | None = None,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+) -> ProfileErrors:
+    """SE per bin of window-averaged profiles (windows are the samples of each bin's series).
+
+    Parameters
+    ----------
+    bins
+        Channel ``bins`` table.
+    columns
+        Columns to analyse.
+    start_window
+        Position (0-based, in the sorted window list) of the first steady window; default from
+        :func:`window_steady_start`.
+    min_blocks
+        Convergence requirement of :func:`blocking_many`.
+    """
+    bm = bin_matrix(bins, columns)
+    if start_window is None:
+        start_window = window_steady_start(bm).index
+    keep = np.arange(bm.window.size) >= start_window
+    bm = bm.select(keep)
+    out: dict[str, Any] = {"bin": bm.bin, "x": bm.x}
+    whole: dict[str, dict[str, float]] = {}
+    for c in columns:
+        if c not in bm.data:
+            continue
+        b = blocking_many(bm.data[c], bm.dt, min_blocks=min_blocks)
+        out[c] = b.mean
+        out[f"{c}_se"] = b.se
+        out[f"{c}_se_err"] = b.se_err
+        out[f"{c}_tau"] = b.tau
+        out[f"{c}_converged"] = b.converged
+        rms, rms_err, scale, frac = _rms_profile(b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = rms / scale if scale else np.nan
+            max_rel = float(np.nanmax(np.abs(b.se / b.mean))) if np.any(b.mean != 0) else np.nan
+        whole[c] = {
+            "rms_se": rms,
+            "rms_se_err": rms_err,
+            "scale": scale,
+            "rel_error": rel,
+            "frac_converged": frac,
+            "max_rel_se": max_rel,
+        }
+    t_start = float(bm.t0[0]) if bm.t0.size else np.nan
+    return ProfileErrors(pl.DataFrame(out), whole, t_start, int(bm.window.size), bm.dt)
+
+
+@quiet
+def profile_se_vs_time(
+    bins: TableLike,
+    col: str = "u_y",
+    wall_time_per_unit_t: float | None = None,
+    fractions: Sequence[float] = DEFAULT_FRACTIONS,
+    *,
+    start_window: int | None = None,
+    min_blocks: int = DEFAULT_MIN_BLOCKS,
+    converged_fraction: float = 0.9,
+) -> SEvsTime:
+    """Profile-as-a-whole SE (RMS over bins of the per-bin SE of ``col``) vs averaging time.
+
+    Same table and ``C / sqrt(T)`` fit as :func:`se_vs_time`; the ``mean`` column holds the
+    profile scale (RMS of the mean profile), so ``se / mean`` is the relative profile error.  A
+    prefix counts as converged when at least ``converged_fraction`` of the bins converged.
+    """
+    bm = bin_matrix(bins, [col])
+    if start_window is None:
+        start_window = window_steady_start(bm, col).index
+    mat = bm.data[col][start_window:]
+    dts = bm.dt
+    rows: list[dict[str, Any]] = []
+    for f in sorted(set(float(v) for v in fractions)):
+        n_f = int(round(f * mat.shape[0]))
+        if n_f < 2:
+            continue
+        b = blocking_many(mat[:n_f], dts, min_blocks=min_blocks)
+        rms, rms_err, scale, frac = _rms_profile(b)
+        T = n_f * dts
+        rows.append(
+            {
+                "fraction": f,
+                "n": n_f,
+                "T": T,
+                "wall_time": None if wall_time_per_unit_t is None else T * wall_time_per_unit_t,
+                "mean": scale,
+                "se": rms,
+                "se_err": rms_err,
+                "tau": float(np.nanmax(b.tau)),
+                "converged": frac >= converged_fraction,
+            }
+        )
+    t_start = float(bm.t0[start_window]) if bm.t0.size > start_window else np.nan
+    return _se_table_result(rows, wall_time_per_unit_t, t_start)
+
+
+# --------------------------------------------------------------------------------------------
+# jackknife over blocks of samples
+# --------------------------------------------------------------------------------------------
+def choose_blocks(n: int, g: float = 1.0, max_blocks: int = 32) -> tuple[int, int]:
+    """Block length ``L >= ceil(g)`` (g = statistical inefficiency, in samples) and number of
+    blocks ``n // L`` (at most ``max_blocks``) for a jackknife over contiguous blocks."""
+    g = g if np.isfinite(g) else 1.0
+    L = max(1, int(math.ceil(g)), int(math.ceil(n / max_blocks)))
+    return L, n // L
+
+
+@quiet
+def jackknife_se(full: Any, replicates: Sequence[Any]) -> Any:
+    """Delete-one-block jackknife SE: ``sqrt((nb-1)/nb * sum_i (theta_i - mean theta)^2)``.
+
+    ``full`` is the estimate from all data (returned unchanged by the caller); works for
+    scalars and arrays (element-wise, NaN replicates ignored).
+    """
+    reps = np.asarray([np.asarray(r, dtype=np.float64) for r in replicates])
+    if reps.shape[0] < 2:
+        return np.full(np.shape(full), np.nan) if np.ndim(full) else np.nan
+    fin = np.isfinite(reps)
+    nb = fin.sum(axis=0).astype(np.float64)
+    mean = np.where(fin, reps, 0.0).sum(axis=0) / np.maximum(nb, 1.0)
+    ssq = np.where(fin, (reps - mean) ** 2, 0.0).sum(axis=0)
+    se = np.sqrt(np.where(nb >= 2, (nb - 1.0) / np.maximum(nb, 1.0) * ssq, np.nan))
+    return float(se) if np.ndim(se) == 0 else se
+
+
+@quiet
+def block_means(
+    x: FloatArray, weights: FloatArray, block_len: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Weighted full mean and leave-one-block-out means of ``x`` (n, ...) over contiguous blocks.
+
+    The first ``n mod block_len`` samples (the earliest) are discarded so that all blocks are
+    equal.  Returns (full mean over the kept samples, loo means (nb, ...), kept mask).
+    """
+    n = x.shape[0]
+    nb = n // block_len
+    drop = n - nb * block_len
+    keep = np.arange(n) >= drop
+    xk = x[drop:].reshape((nb, block_len) + x.shape[1:])
+    wk = weights[drop:].reshape(nb, block_len)
+    wshape = (nb, block_len) + (1,) * (x.ndim - 1)
+    s = np.sum(xk * wk.reshape(wshape), axis=1)
+    w = np.sum(wk, axis=1).reshape((nb,) + (1,) * (x.ndim - 1))
+    full = s.sum(axis=0) / w.sum(axis=0)
+    loo = (s.sum(axis=0)[None] - s) / (w.sum(axis=0)[None] - w)
+    return full, loo, keep
+
+
+@quiet
+def jackknife(
+    fn: Callable[[FloatArray], Any], full_input: FloatArray, loo_inputs: FloatArray
+) -> tuple[Any, Any]:
+    """Evaluate ``fn`` on the full-sample mean and on each leave-one-block-out mean and return
+    ``(value, jackknife SE)``."""
+    value = fn(full_input)
+    reps = [fn(loo_inputs[i]) for i in range(loo_inputs.shape[0])]
+    return value, jackknife_se(value, reps)

@@ -1,0 +1,89 @@
+"""Command line: ``granflow run SCENE.toml --out DIR``, ``granflow summary DIR``,
+``granflow plot DIR``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from granflow.errors import GranflowError
+
+
+def _cmd_run(a: argparse.Namespace) -> int:
+    from granflow.runner import execute, load_spec
+
+    spec = load_spec(a.scene)
+    r = execute(spec, a.out, progress=None if not a.quiet else False, threads=a.threads)
+    print(f"{r.status}: {r.directory} ({r.wall_seconds:.1f} s)")
+    _print_summary(r.summary)
+    return 0
+
+
+def _print_summary(s: dict) -> None:
+    width = max((len(k) for k in s), default=0)
+    for k in sorted(s):
+        v = s[k]
+        if k.endswith("_se"):
+            continue
+        se = s.get(k + "_se")
+        if isinstance(v, float):
+            txt = f"{v:.6g}" + (f" ± {se:.2g}" if isinstance(se, float) else "")
+        else:
+            txt = json.dumps(v) if isinstance(v, (dict, list)) else str(v)
+        print(f"  {k:<{width}}  {txt}")
+
+
+def _cmd_summary(a: argparse.Namespace) -> int:
+    f = Path(a.dir) / "summary.json"
+    if not f.exists():
+        print(f"no summary.json in {a.dir} (run not finished?)", file=sys.stderr)
+        return 2
+    s = json.loads(f.read_text())
+    m = json.loads((Path(a.dir) / "manifest.json").read_text())
+    print(f"{m['spec']['scene']} run, seed {m['seed']}, status {m['status']}, "
+          f"{m['steps_done']} steps, {m['wall_seconds']:.1f} s")
+    _print_summary(s)
+    return 0
+
+
+def _cmd_plot(a: argparse.Namespace) -> int:
+    from granflow.plotting import plot_run
+
+    for p in plot_run(a.dir):
+        print(p)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="granflow", description="DEM granular-flow simulations")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run", help="run a scene described by a TOML file",
+                       description="Run (or resume) a scene into a directory of Parquet files.")
+    r.add_argument("scene", help="scene TOML file (see examples/*.toml)")
+    r.add_argument("--out", required=True, help="output directory")
+    r.add_argument("--threads", type=int, default=None, help="threads (default: all cores)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(fn=_cmd_run)
+    s = sub.add_parser("summary", help="print a run's analysis with error bars",
+                       description="Print the summary (means ± standard errors) of a run.")
+    s.add_argument("dir")
+    s.set_defaults(fn=_cmd_summary)
+    p = sub.add_parser("plot", help="write a run's figures (PNG)",
+                       description="Write the scene's figures as PNG files into DIR/plots.")
+    p.add_argument("dir")
+    p.set_defaults(fn=_cmd_plot)
+    a = ap.parse_args(argv)
+    try:
+        return a.fn(a)
+    except GranflowError as e:
+        print(f"granflow: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("granflow: interrupted (checkpoint written; run again to resume)", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,167 @@
+"""Run a scene described by a spec (the TOML file of ``granflow run``) into a directory:
+
+    DIR/manifest.json      parameters, seed, granflow version, status, steps, wall time
+    DIR/checkpoint.gfck    latest checkpoint (resumable; written atomically)
+    DIR/<table>.parquet    sample tables (atomic; parameters and seed in the file metadata)
+    DIR/summary.json       the scene's analysis with standard errors
+    DIR/snapshots/         particle snapshots on a trigger (optional)
+
+Running again on the same directory resumes from the checkpoint; a finished run is skipped.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from granflow import io
+from granflow._core import __version__
+from granflow.errors import ParameterError
+from granflow.scenes import check_keys, get_scene
+
+RUN_KEYS = {"steps": 0, "chunk": 0, "checkpoint_every": 0}
+OUTPUT_KEYS = {"snapshot_every": 0, "snapshot_format": "xyz", "tables": True}
+TOP_KEYS = {"scene": "", "seed": 0, "threads": None, "params": {}, "run": {}, "output": {}}
+
+
+@dataclass
+class RunResult:
+    directory: Path
+    status: str
+    summary: dict[str, Any]
+    wall_seconds: float
+
+
+def load_spec(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a TOML scene file."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib  # type: ignore[no-redef]
+    with open(path, "rb") as f:
+        return tomllib.load(f)
+
+
+def validate_spec(spec: Mapping[str, Any]) -> dict[str, Any]:
+    check_keys("spec", spec, TOP_KEYS)
+    if "scene" not in spec:
+        raise ParameterError("invalid spec: missing key 'scene': allowed 'channel', 'cell', 'gas'")
+    run = dict(spec.get("run", {}))
+    check_keys("run", run, RUN_KEYS)
+    steps = run.get("steps")
+    if not isinstance(steps, int) or steps < 0:
+        raise ParameterError(f"invalid run.steps = {steps!r}: allowed an integer >= 0")
+    out = dict(spec.get("output", {}))
+    check_keys("output", out, OUTPUT_KEYS)
+    if out.get("snapshot_format", "xyz") not in ("xyz", "vtp"):
+        raise ParameterError(
+            f"invalid output.snapshot_format = {out['snapshot_format']!r}: allowed 'xyz' or 'vtp'"
+        )
+    return {**spec, "run": run, "output": out}
+
+
+def _read_manifest(d: Path) -> dict[str, Any] | None:
+    f = d / "manifest.json"
+    if not f.exists():
+        return None
+    return json.loads(f.read_text())
+
+
+def _load_tables(d: Path, upto_time: float) -> dict[str, pa.Table]:
+    """Tables written with the last checkpoint, without rows newer than it."""
+    out: dict[str, pa.Table] = {}
+    for f in d.glob("*.parquet"):
+        t = pq.read_table(f)
+        tcol = "t1" if "t1" in t.column_names else ("t" if "t" in t.column_names else None)
+        if tcol is not None:
+            t = t.filter(pc.less_equal(t[tcol], upto_time * (1 + 1e-12) + 1e-300))
+        out[f.stem] = t.replace_schema_metadata(None)
+    return out
+
+
+def execute(
+    spec: Mapping[str, Any],
+    out: str | os.PathLike,
+    progress: bool | None = None,
+    threads: int | None = None,
+) -> RunResult:
+    """Run (or resume, or skip if finished) the scene of ``spec`` into directory ``out``."""
+    spec = validate_spec(spec)
+    d = Path(out)
+    d.mkdir(parents=True, exist_ok=True)
+    man = _read_manifest(d)
+    if man and man.get("status") == "finished" and man.get("spec") == json.loads(
+        json.dumps(spec)
+    ):
+        summ = json.loads((d / "summary.json").read_text()) if (d / "summary.json").exists() else {}
+        return RunResult(d, "skipped", summ, man.get("wall_seconds", 0.0))
+    cls = get_scene(spec["scene"])
+    seed = int(spec.get("seed", 0))
+    threads = threads if threads is not None else spec.get("threads")
+    scene = cls.from_spec(spec.get("params", {}), seed=seed, threads=threads)
+    ck = d / "checkpoint.gfck"
+    wall0 = 0.0
+    if ck.exists() and man is not None and man.get("spec") == json.loads(json.dumps(spec)):
+        scene.restore(ck)
+        scene.load_tables(_load_tables(d, scene._sim.time))
+        wall0 = float(man.get("wall_seconds", 0.0))
+    run, outp = spec["run"], spec["output"]
+    total = int(run["steps"])
+    every = int(run.get("checkpoint_every", 0)) or max(total // 10, 1)
+    snap_every = int(outp.get("snapshot_every", 0))
+    params = {"scene": spec["scene"], "seed": seed, **scene.parameters()}
+    manifest = {
+        "spec": spec,
+        "parameters": params,
+        "granflow_version": __version__,
+        "seed": seed,
+        "status": "running",
+        "steps_done": scene._sim.step,
+        "steps_total": total,
+        "wall_seconds": wall0,
+    }
+    io.write_manifest(d, manifest)
+    t0 = time.perf_counter()
+
+    def save_all(status: str) -> None:
+        if outp.get("tables", True):
+            for name, t in scene.tables().items():
+                io.write_parquet(t, d / f"{name}.parquet", params=params, seed=seed)
+        scene.save_checkpoint(ck)
+        manifest.update(
+            status=status,
+            steps_done=scene._sim.step,
+            wall_seconds=wall0 + time.perf_counter() - t0,
+        )
+        io.write_manifest(d, manifest)
+
+    try:
+        while scene._sim.step < total:
+            nxt = min(total, (scene._sim.step // every + 1) * every)
+            if snap_every:
+                nxt = min(nxt, (scene._sim.step // snap_every + 1) * snap_every)
+            scene.run(nxt - scene._sim.step, progress=progress)
+            if snap_every and scene._sim.step % snap_every == 0:
+                fmt = outp.get("snapshot_format", "xyz")
+                io.snapshot(scene, d / "snapshots" / f"snap_{scene._sim.step:010d}.{fmt}")
+            if scene._sim.step % every == 0 and scene._sim.step < total:
+                save_all("running")
+    except (KeyboardInterrupt, SystemExit):
+        save_all("interrupted")
+        raise
+    summary = scene.summary()
+    summary["wall_seconds"] = wall0 + time.perf_counter() - t0
+    summary["steps"] = scene._sim.step
+    with io.atomic_path(d / "summary.json") as tmp:
+        tmp.write_text(json.dumps(io._jsonable(summary), indent=1, sort_keys=True))
+    save_all("finished")
+    return RunResult(d, "finished", summary, manifest["wall_seconds"])

@@ -1,0 +1,98 @@
+"""granflow run / summary / plot, resumable runs, sweeps (process pool and Dask)."""
+
+import json
+import subprocess
+import sys
+
+import granflow as gf
+import polars as pl
+import pytest
+from granflow.cli import main
+from granflow.runner import execute
+from granflow.study import run_grid
+
+GAS = {
+    "scene": "gas",
+    "seed": 3,
+    "params": {"L": 7.0, "phi": 0.25, "kn": 1e4, "sample_every": 50},
+    "run": {"steps": 600, "checkpoint_every": 200},
+    "output": {"snapshot_every": 300, "snapshot_format": "xyz"},
+}
+
+
+def test_run_summary_and_resume(tmp_path, capsys):
+    toml = tmp_path / "gas.toml"
+    toml.write_text(
+        'scene = "gas"\nseed = 3\n[params]\nL = 7.0\nphi = 0.25\nkn = 1e4\nsample_every = 50\n'
+        "[run]\nsteps = 600\ncheckpoint_every = 200\n"
+        '[output]\nsnapshot_every = 300\nsnapshot_format = "xyz"\n'
+    )
+    out = tmp_path / "run"
+    assert main(["run", str(toml), "--out", str(out), "--quiet"]) == 0
+    man = json.loads((out / "manifest.json").read_text())
+    assert man["status"] == "finished" and man["steps_done"] == 600
+    assert (out / "series.parquet").exists() and (out / "checkpoint.gfck").exists()
+    assert len(list((out / "snapshots").glob("*.xyz"))) == 2
+    series = pl.read_parquet(out / "series.parquet")
+    assert series["step"].to_list() == list(range(50, 601, 50))
+    assert gf.io.read_params(out / "series.parquet")["seed"] == 3
+    assert main(["summary", str(out)]) == 0
+    assert "ke_trans_mean" in capsys.readouterr().out
+    # running again skips the finished run
+    assert execute(GAS, out).status == "skipped"
+
+
+def test_resume_after_interrupt_matches_uninterrupted(tmp_path):
+    a = execute(GAS, tmp_path / "a", progress=False)
+    # an interrupted run: stop at 400 by running a shorter spec, then extend it
+    spec = json.loads(json.dumps(GAS))
+    spec["run"]["steps"] = 400
+    execute(spec, tmp_path / "b", progress=False)
+    man = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    man["spec"] = GAS  # pretend the 600-step run stopped at its step-400 checkpoint
+    man["status"] = "interrupted"
+    (tmp_path / "b" / "manifest.json").write_text(json.dumps(man))
+    b = execute(GAS, tmp_path / "b", progress=False)
+    assert b.status == "finished"
+    sa = pl.read_parquet(tmp_path / "a" / "series.parquet")
+    sb = pl.read_parquet(tmp_path / "b" / "series.parquet")
+    assert sa.equals(sb)
+    assert a.summary["ke_trans_last"] == b.summary["ke_trans_last"]
+
+
+def test_bad_spec_names_the_key(tmp_path):
+    bad = json.loads(json.dumps(GAS))
+    bad["params"]["kn_typo"] = 1.0
+    with pytest.raises(gf.ParameterError, match="params.kn_typo"):
+        execute(bad, tmp_path / "x")
+    bad = json.loads(json.dumps(GAS))
+    bad["run"]["steps"] = -1
+    with pytest.raises(gf.ParameterError, match="run.steps"):
+        execute(bad, tmp_path / "y")
+
+
+def test_cli_help():
+    r = subprocess.run([sys.executable, "-m", "granflow.cli", "run", "--help"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0 and "--out" in r.stdout
+
+
+def test_sweep_local_pool_and_skip(tmp_path):
+    base = {**GAS, "run": {"steps": 200}, "output": {}}
+    df = run_grid(base, {"mu": [0.0, 0.5]}, tmp_path, seeds=[1, 2], workers=2)
+    assert df.height == 4 and set(df["status"]) == {"finished"}
+    assert sorted(df["mu"].to_list()) == [0.0, 0.0, 0.5, 0.5]
+    ds = pl.scan_parquet(str(tmp_path / "**/*.parquet"), hive_partitioning=True).collect()
+    assert set(ds["seed"].unique()) == {1, 2}
+    again = run_grid(base, {"mu": [0.0, 0.5]}, tmp_path, seeds=[1, 2], workers=2)
+    assert set(again["status"]) == {"skipped"}
+
+
+def test_sweep_on_dask_local_cluster(tmp_path):
+    import distributed
+    base = {**GAS, "run": {"steps": 100}, "output": {}}
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        with distributed.Client(cluster) as client:
+            df = run_grid(base, {"mu": [0.0, 0.3]}, tmp_path, seeds=[1], scheduler=client)
+    assert df.height == 2 and set(df["status"]) == {"finished"}
