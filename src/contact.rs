@@ -274,9 +274,11 @@ impl Friction for Coulomb {
         // rotation). Discretely: project onto the current plane and restore the magnitude.
         let u2 = u.norm_squared();
         if u2 > 0.0 {
-            u -= u.dot(n) * n;
-            let p2 = u.norm_squared();
-            if p2 > 0.0 {
+            let un = u.dot(n);
+            u -= un * n;
+            // |u_projected|^2 = u2 - un^2; restore |u| (skip when the normal did not turn)
+            let p2 = u2 - un * un;
+            if p2 > 0.0 && un != 0.0 {
                 u *= (u2 / p2).sqrt();
             }
         }

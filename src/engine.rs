@@ -18,9 +18,8 @@ use crate::neighbor::NeighborList;
 use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
+use std::time::Instant;
 
-/// Pairs per work unit of the force loop (fixed: results must not depend on thread count).
-const PAIR_CHUNK: usize = 2048;
 /// Particles per work unit of the gather loop.
 const PART_CHUNK: usize = 1024;
 /// Most planar walls a scene can have (two side walls and a temporary floor).
@@ -131,6 +130,16 @@ pub struct StepDiag {
     pub contacts: usize,
 }
 
+/// Wall-clock seconds spent in each part of the step (cheap: a few clock reads per step).
+#[derive(Clone, Debug, Default)]
+pub struct Timers {
+    pub integrate: f64,
+    pub neighbor: f64,
+    pub forces: f64,
+    pub pair_phase: f64,
+    pub gather_phase: f64,
+}
+
 /// Run-time guards: stop with a clear error instead of writing NaN.
 #[derive(Clone, Debug)]
 pub struct Guards {
@@ -162,6 +171,12 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub time: f64,
     pub guards: Guards,
     pub diag: StepDiag,
+    pub timers: Timers,
+    /// Per-step packed copies for the pair loop: (x, R) in one 32-byte record for the distance
+    /// test, and (predicted v, m, predicted w) in one 64-byte line for contacts, so a
+    /// neighbour costs one or two cache lines instead of one per array.
+    xr: Vec<[f64; 4]>,
+    kin: Vec<[f64; 8]>,
     /// Ask the next force evaluation for the virial (samplers set this).
     pub want_virial: bool,
     /// Per-pair forces of the last evaluation (list order).
@@ -265,6 +280,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             time: 0.0,
             guards: Guards::default(),
             diag: StepDiag::default(),
+            timers: Timers::default(),
+            xr: Vec::new(),
+            kin: Vec::new(),
             want_virial: false,
             pair_out: Vec::new(),
             in_contact: Vec::new(),
@@ -368,14 +386,23 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     fn step_once(&mut self) -> Result<()> {
         let dt = self.dt;
+        let t0 = Instant::now();
         self.domain.integrate_initial(&mut self.p, dt);
         self.wrap_all();
+        let t1 = Instant::now();
         if self.nl.needs_rebuild(&self.p, &self.domain) || self.domain.rebuild_due(self.nl.skin) {
             self.rebuild();
         }
+        let t2 = Instant::now();
         self.compute_forces();
+        let t3 = Instant::now();
         let vir = self.diag.virial;
         self.domain.integrate_final(&mut self.p, dt, &vir);
+        let t4 = Instant::now();
+        let tm = &mut self.timers;
+        tm.integrate += (t1 - t0).as_secs_f64() + (t4 - t3).as_secs_f64();
+        tm.neighbor += (t2 - t1).as_secs_f64();
+        tm.forces += (t3 - t2).as_secs_f64();
         self.step += 1;
         self.time += dt;
         self.check_overlap()?;
@@ -474,6 +501,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// Evaluate all forces and torques for the current positions and velocities.
     pub fn compute_forces(&mut self) {
+        let tstart = Instant::now();
         let dt = self.dt;
         let hdt = 0.5 * dt;
         let want_vir = D::NEEDS_VIRIAL || self.want_virial;
@@ -482,79 +510,138 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let p = &self.p;
         let nl = &mut self.nl;
 
-        // Phase 1: pair forces, per fixed chunk of pairs.
-        let stats: Vec<(f64, usize, M3, usize)> = nl
-            .pair_i
-            .par_chunks(PAIR_CHUNK)
-            .zip(nl.pair_j.par_chunks(PAIR_CHUNK))
-            .zip(nl.hist.par_chunks_mut(PAIR_CHUNK.max(1)))
-            .zip(self.pair_out.par_chunks_mut(PAIR_CHUNK))
-            .zip(self.in_contact.par_chunks_mut(PAIR_CHUNK))
+        // Phase 1: pair forces. Work units are fixed chunks of particles (the pairs of a
+        // particle are contiguous in the list), so each particle's data is loaded once and the
+        // results do not depend on the number of threads.
+        let n = p.len();
+        // packed per-step copies (see `xr`, `kin`)
+        self.xr.resize(n, [0.0; 4]);
+        self.kin.resize(n, [0.0; 8]);
+        self.xr
+            .par_iter_mut()
+            .zip(self.kin.par_iter_mut())
             .enumerate()
-            .map(|(ci, ((((pi, pj), hist), out), flag))| {
+            .with_min_len(4096)
+            .for_each(|(i, (a, b))| {
+                let x = p.x[i];
+                *a = [x.x, x.y, x.z, p.radius[i]];
+                let v = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
+                let w = p.omega[i] + (hdt * p.inv_inertia[i]) * p.torque[i];
+                *b = [v.x, v.y, v.z, p.inv_mass[i], w.x, w.y, w.z, 0.0];
+            });
+        let xr = &self.xr;
+        let kin = &self.kin;
+        let own_start = &nl.own_start;
+        let pair_j = &nl.pair_j;
+        let nchunks = n.div_ceil(PART_CHUNK);
+        let mut pieces = Vec::with_capacity(nchunks);
+        {
+            let mut h: &mut [T::History] = &mut nl.hist;
+            let mut o: &mut [PairOut] = &mut self.pair_out;
+            let mut fl: &mut [u8] = &mut self.in_contact;
+            for c in 0..nchunks {
+                let lo = own_start[c * PART_CHUNK] as usize;
+                let hi = own_start[((c + 1) * PART_CHUNK).min(n)] as usize;
+                let (a, rest) = std::mem::take(&mut h).split_at_mut(hi - lo);
+                h = rest;
+                let (b, rest) = std::mem::take(&mut o).split_at_mut(hi - lo);
+                o = rest;
+                let (f, rest) = std::mem::take(&mut fl).split_at_mut(hi - lo);
+                fl = rest;
+                pieces.push((c, a, b, f));
+            }
+        }
+        // Each work unit also sums the forces of its particles' own pairs straight into
+        // p.force / p.torque (list order); the gather phase then adds only the reverse pairs.
+        let stats: Vec<(f64, usize, M3, usize)> = pieces
+            .into_par_iter()
+            .zip(self.p.force.par_chunks_mut(PART_CHUNK))
+            .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
+            .map(|(((c, hist, out, flag), fo), to)| {
                 let mut max_ov = 0.0f64;
                 let mut at = 0usize;
                 let mut vir = M3::zeros();
                 let mut nc = 0usize;
-                for k in 0..pi.len() {
-                    let i = pi[k] as usize;
-                    let j = pj[k] as usize;
-                    let d = dom.delta(&p.x[i], &p.x[j]);
-                    let r2 = d.norm_squared();
-                    let (ri, rj) = (p.radius[i], p.radius[j]);
-                    let rs = ri + rj;
-                    if r2 >= rs * rs {
-                        if flag[k] != 0 {
-                            // the contact just opened: drop its history and force
-                            if T::FRICTIONAL {
-                                hist[k] = T::History::default();
+                let i0 = c * PART_CHUNK;
+                let i1 = ((c + 1) * PART_CHUNK).min(n);
+                let base = own_start[i0] as usize;
+                for i in i0..i1 {
+                    let (k0, k1) = (own_start[i] as usize, own_start[i + 1] as usize);
+                    let mut fsum = V3::zeros();
+                    let mut qsum = V3::zeros();
+                    let [xi0, xi1, xi2, ri] = xr[i];
+                    let xi = V3::new(xi0, xi1, xi2);
+                    for k in k0..k1 {
+                        let kk = k - base;
+                        // SAFETY: list indices are < n by construction (built from 0..n).
+                        let j = unsafe { *pair_j.get_unchecked(k) } as usize;
+                        let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
+                        let d = dom.delta(&xi, &V3::new(xj0, xj1, xj2));
+                        let r2 = d.norm_squared();
+                        let rs = ri + rj;
+                        if r2 >= rs * rs {
+                            if flag[kk] != 0 {
+                                // the contact just opened: drop its history and force
+                                if T::FRICTIONAL {
+                                    hist[kk] = T::History::default();
+                                }
+                                out[kk] = PairOut::default();
+                                flag[kk] = 0;
                             }
-                            out[k] = PairOut::default();
-                            flag[k] = 0;
+                            continue;
                         }
-                        continue;
+                        flag[kk] = 1;
+                        nc += 1;
+                        let r = r2.sqrt();
+                        let ki = &kin[i];
+                        let kj = unsafe { kin.get_unchecked(j) };
+                        // one division for 1/r, 1/(R_i+R_j) and m_eff = 1/(1/m_i + 1/m_j)
+                        let (imi, imj) = (ki[3], kj[3]);
+                        let ims = imi + imj;
+                        let q = 1.0 / (r * rs * ims);
+                        let inv_r = rs * ims * q;
+                        let inv_rs = r * ims * q;
+                        let meff = r * rs * q;
+                        let nrm = d * inv_r;
+                        let delta = rs - r;
+                        // Lever arms l_i = r R_i/(R_i+R_j), l_j = r R_j/(R_i+R_j): the contact
+                        // point lies on the branch vector and l_i + l_j = r, which makes the
+                        // pair torques conserve total angular momentum; for equal spheres this
+                        // is exactly 002 (2.18b), (w_i + w_j) x r_ij / 2.
+                        let arm = r * inv_rs;
+                        // kin holds velocities predicted to the end of the step,
+                        // v(n+1/2) + dt/2 a(n): the dashpot sees v(n+1) to O(dt^2) instead of
+                        // the half-step velocity (plain velocity Verlet: O(dt) error in e_n).
+                        let vi = V3::new(ki[0], ki[1], ki[2]);
+                        let vj = V3::new(kj[0], kj[1], kj[2]);
+                        let wi = V3::new(ki[4], ki[5], ki[6]);
+                        let wj = V3::new(kj[4], kj[5], kj[6]);
+                        let mut vrel = vi - vj - (arm * (ri * wi + rj * wj)).cross(&nrm);
+                        if D::STREAMING {
+                            vrel += dom.streaming_velocity(&d);
+                        }
+                        let pf = law.eval(&nrm, delta, rs, meff, &vrel, &mut hist[kk], dt);
+                        let q = -arm * nrm.cross(&pf.ft);
+                        out[kk] = PairOut { f: pf.f, q };
+                        fsum += pf.f;
+                        qsum += q;
+                        let ov = delta * inv_rs;
+                        if ov > max_ov {
+                            max_ov = ov;
+                            at = k;
+                        }
+                        if want_vir {
+                            vir += d * pf.f.transpose();
+                        }
                     }
-                    flag[k] = 1;
-                    nc += 1;
-                    let r = r2.sqrt();
-                    let n = d / r;
-                    let delta = rs - r;
-                    let (mi, mj) = (p.mass[i], p.mass[j]);
-                    let meff = mi * mj / (mi + mj);
-                    // Lever arms l_i = r R_i/(R_i+R_j), l_j = r R_j/(R_i+R_j): the contact
-                    // point lies on the branch vector and l_i + l_j = r, which makes the pair
-                    // torques conserve total angular momentum; for equal spheres this is
-                    // exactly 002 (2.18b), (w_i + w_j) x r_ij / 2.
-                    let arm = r / rs;
-                    // Velocities predicted to the end of the step, v(n+1/2) + dt/2 a(n):
-                    // the dashpot then sees v(n+1) to O(dt^2) instead of the half-step velocity
-                    // (which makes the restitution of plain velocity Verlet off by O(dt)).
-                    let vi = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
-                    let vj = p.v[j] + (hdt * p.inv_mass[j]) * p.force[j];
-                    let wi = p.omega[i] + (hdt * p.inv_inertia[i]) * p.torque[i];
-                    let wj = p.omega[j] + (hdt * p.inv_inertia[j]) * p.torque[j];
-                    let mut vrel = vi - vj - (arm * (ri * wi + rj * wj)).cross(&n);
-                    if D::STREAMING {
-                        vrel += dom.streaming_velocity(&d);
-                    }
-                    let pf = law.eval(&n, delta, rs, meff, &vrel, &mut hist[k], dt);
-                    out[k] = PairOut {
-                        f: pf.f,
-                        q: -arm * n.cross(&pf.ft),
-                    };
-                    let ov = delta / rs;
-                    if ov > max_ov {
-                        max_ov = ov;
-                        at = ci * PAIR_CHUNK + k;
-                    }
-                    if want_vir {
-                        vir += d * pf.f.transpose();
-                    }
+                    fo[i - i0] = fsum;
+                    to[i - i0] = qsum;
                 }
                 (max_ov, at, vir, nc)
             })
             .collect();
 
+        let tp = Instant::now();
         let mut diag = StepDiag::default();
         for (ov, at, vir, nc) in &stats {
             if *ov > diag.max_overlap {
@@ -568,7 +655,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         // Phase 2: gather per particle in list order; walls and gravity.
         let pair_out = &self.pair_out;
         let flags = &self.in_contact;
-        let own_start = &nl.own_start;
+        let kin = &self.kin;
         let rev_start = &nl.rev_start;
         let rev_k = &nl.rev_k;
         let g = self.body.g();
@@ -576,12 +663,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let planes = walls.planes();
         let wlaw = walls.law();
         let x = &self.p.x;
-        let v = &self.p.v;
-        let om = &self.p.omega;
         let rad = &self.p.radius;
         let mass = &self.p.mass;
-        let p_inv_mass = &self.p.inv_mass;
-        let p_inv_inertia = &self.p.inv_inertia;
         let body = |ci: usize,
                     fo: &mut [V3],
                     to: &mut [V3],
@@ -592,15 +675,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let base = ci * PART_CHUNK;
             for l in 0..fo.len() {
                 let i = base + l;
-                let mut f = V3::zeros();
-                let mut q = V3::zeros();
-                for k in own_start[i]..own_start[i + 1] {
-                    if flags[k as usize] != 0 {
-                        let o = &pair_out[k as usize];
-                        f += o.f;
-                        q += o.q;
-                    }
-                }
+                let mut f = fo[l];
+                let mut q = to[l];
                 for r in rev_start[i]..rev_start[i + 1] {
                     let k = rev_k[r as usize] as usize;
                     if flags[k] != 0 {
@@ -626,8 +702,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         nrm[pl.axis] = pl.sign;
                         let delta = ri - gap;
                         // contact point on the plane: lever arm = gap
-                        let vi = v[i] + (hdt * p_inv_mass[i]) * fo[l];
-                        let wi = om[i] + (hdt * p_inv_inertia[i]) * to[l];
+                        // predicted end-of-step velocities, as for pairs
+                        let kk = &kin[i];
+                        let vi = V3::new(kk[0], kk[1], kk[2]);
+                        let wi = V3::new(kk[4], kk[5], kk[6]);
                         let vrel = vi - (gap * wi).cross(&nrm);
                         let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
                         f += pf.f;
@@ -679,5 +757,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         self.diag = diag;
         self.forces_valid = true;
+        let te = Instant::now();
+        self.timers.pair_phase += (tp - tstart).as_secs_f64();
+        self.timers.gather_phase += (te - tp).as_secs_f64();
     }
 }

@@ -133,26 +133,34 @@ impl<T: Friction> NeighborList<T> {
         }
         let cell_sorted: Vec<u32> = perm.iter().map(|&o| cells[o]).collect();
 
-        // 4. neighbour cell offsets per axis, de-duplicated (few cells on a periodic axis)
-        let offsets = |k: usize, c: usize| -> Vec<usize> {
-            let m = nb[k] as isize;
-            let mut v: Vec<usize> = Vec::with_capacity(3);
-            for o in -1isize..=1 {
-                let cc = c as isize + o;
-                let cc = if per[k] {
-                    cc.rem_euclid(m)
-                } else if cc < 0 || cc >= m {
-                    continue;
-                } else {
-                    cc
-                };
-                if !v.contains(&(cc as usize)) {
-                    v.push(cc as usize);
-                }
-            }
-            v
-        };
-
+        // 4. neighbour cells per axis and cell coordinate, de-duplicated (a periodic axis with
+        // fewer than 3 cells would otherwise visit a cell twice); computed once per build.
+        let tabs: Vec<Vec<([usize; 3], usize)>> = (0..3)
+            .map(|k| {
+                let m = nb[k] as isize;
+                (0..nb[k])
+                    .map(|c| {
+                        let mut v = [0usize; 3];
+                        let mut cnt = 0;
+                        for o in -1isize..=1 {
+                            let cc = c as isize + o;
+                            let cc = if per[k] {
+                                cc.rem_euclid(m)
+                            } else if cc < 0 || cc >= m {
+                                continue;
+                            } else {
+                                cc
+                            } as usize;
+                            if !v[..cnt].contains(&cc) {
+                                v[cnt] = cc;
+                                cnt += 1;
+                            }
+                        }
+                        (v, cnt)
+                    })
+                    .collect()
+            })
+            .collect();
         let skin = self.skin;
         let x = &p.x;
         let rad = &p.radius;
@@ -165,20 +173,26 @@ impl<T: Friction> NeighborList<T> {
                 let mut counts = Vec::with_capacity(hi - lo);
                 let mut js = Vec::with_capacity((hi - lo) * 8);
                 let mut cand: Vec<u32> = Vec::with_capacity(64);
+                let tabs = &tabs;
                 for i in lo..hi {
                     let c = cell_sorted[i] as usize;
                     let cx = c % nb[0];
                     let cy = (c / nb[0]) % nb[1];
                     let cz = c / (nb[0] * nb[1]);
                     cand.clear();
-                    for &oz in &offsets(2, cz) {
-                        for &oy in &offsets(1, cy) {
-                            for &ox in &offsets(0, cx) {
+                    let (tz, nz) = tabs[2][cz];
+                    let (ty, ny) = tabs[1][cy];
+                    let (tx, nx) = tabs[0][cx];
+                    for &oz in &tz[..nz] {
+                        for &oy in &ty[..ny] {
+                            for &ox in &tx[..nx] {
                                 let cc = (oz * nb[1] + oy) * nb[0] + ox;
                                 let (a, b) = (start_ref[cc] as usize, start_ref[cc + 1] as usize);
+                                let xi = x[i];
+                                let ri = rad[i] + skin;
                                 for j in a.max(i + 1)..b.max(i + 1) {
-                                    let d = dom.delta(&x[i], &x[j]);
-                                    let rc = rad[i] + rad[j] + skin;
+                                    let d = dom.delta(&xi, &x[j]);
+                                    let rc = ri + rad[j];
                                     if d.norm_squared() < rc * rc {
                                         cand.push(j as u32);
                                     }
