@@ -175,8 +175,8 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Per-step packed copies for the pair loop: (x, R) in one 32-byte record for the distance
     /// test, and (predicted v, m, predicted w) in one 64-byte line for contacts, so a
     /// neighbour costs one or two cache lines instead of one per array.
-    xr: Vec<[f64; 4]>,
-    kin: Vec<[f64; 8]>,
+    pub(crate) xr: Vec<[f64; 4]>,
+    pub(crate) kin: Vec<[f64; 8]>,
     /// Ask the next force evaluation for the virial (samplers set this).
     pub want_virial: bool,
     /// Per-pair forces of the last evaluation (list order).
@@ -333,12 +333,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         self.domain.on_rebuild();
         let np = self.nl.len();
-        self.pair_out.clear();
-        self.pair_out.resize(np, PairOut::default());
+        self.pair_out = vec![PairOut::default(); np];
         // carried histories belong to open contacts: mark them so they are reset if the
         // contact turns out to be open at the next evaluation
-        self.in_contact.clear();
-        self.in_contact.resize(np, 0);
+        self.in_contact = vec![0; np];
         if T::FRICTIONAL {
             let zero = T::History::default();
             for (f, h) in self.in_contact.iter_mut().zip(&self.nl.hist) {

@@ -208,7 +208,10 @@ impl<T: Friction> NeighborList<T> {
             })
             .collect();
 
-        // 5. CSR
+        // 5. CSR (exact capacities: no growth slack in the largest arrays)
+        let np_total: usize = chunks.iter().map(|c| c.1.len()).sum();
+        self.pair_i = Vec::with_capacity(np_total);
+        self.pair_j = Vec::with_capacity(np_total);
         self.own_start.clear();
         self.own_start.reserve(n + 1);
         self.own_start.push(0);
@@ -234,8 +237,7 @@ impl<T: Friction> NeighborList<T> {
         for j in 0..n {
             self.rev_start[j + 1] += self.rev_start[j];
         }
-        self.rev_k.clear();
-        self.rev_k.resize(np, 0);
+        self.rev_k = vec![0; np];
         let mut fillr = self.rev_start.clone();
         for (k, &j) in self.pair_j.iter().enumerate() {
             self.rev_k[fillr[j as usize] as usize] = k as u32;
@@ -243,8 +245,7 @@ impl<T: Friction> NeighborList<T> {
         }
 
         // 6. histories
-        self.hist.clear();
-        self.hist.resize(np, T::History::default());
+        self.hist = vec![T::History::default(); np];
         if frictional && !carried.is_empty() {
             for k in 0..np {
                 let a = p.id[self.pair_i[k] as usize];

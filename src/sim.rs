@@ -97,7 +97,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     + vec_bytes(&nl.rev_k)
                     + vec_bytes(&nl.x_build),
             ),
-            ("pair forces".to_string(), vec_bytes(&self.pair_out)),
+            (
+                "pair forces".to_string(),
+                vec_bytes(&self.pair_out) + vec_bytes(&self.in_contact),
+            ),
+            (
+                "packed step records".to_string(),
+                vec_bytes(&self.xr) + vec_bytes(&self.kin),
+            ),
             ("tangential history".to_string(), vec_bytes(&nl.hist)),
             ("wall history".to_string(), vec_bytes(&self.wall_hist)),
         ]
