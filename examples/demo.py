@@ -8,7 +8,6 @@ import tempfile
 from pathlib import Path
 
 import polars as pl
-
 from granflow.runner import execute
 
 SPEC = {

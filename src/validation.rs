@@ -14,11 +14,7 @@ fn free_box() -> OrthoBox {
     OrthoBox::new(V3::zeros(), V3::new(20.0, 20.0, 20.0), [false; 3]).unwrap()
 }
 
-/// Head-on collision of two spheres; returns measured e_n.
-fn head_on<F: Form>(d1: f64, d2: f64, e: f64) -> f64 {
-    head_on_gap::<F>(d1, d2, e, 0.01)
-}
-
+/// Head-on collision of two spheres approaching at unit speed from a gap; returns e_n.
 fn head_on_gap<F: Form>(d1: f64, d2: f64, e: f64, gap: f64) -> f64 {
     let x1 = V3::new(10.0 - 0.5 * d1 - gap, 10.0, 10.0);
     let x2 = V3::new(10.0 + 0.5 * d2 + gap, 10.0, 10.0);
