@@ -404,7 +404,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.step += 1;
         self.time += dt;
         self.check_overlap()?;
-        if self.step % self.guards.check_every == 0 {
+        if self.step.is_multiple_of(self.guards.check_every) {
             self.check_finite()?;
             if D::CLOSED && !G::ON {
                 self.check_energy()?;
@@ -415,7 +415,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     fn check_overlap(&self) -> Result<()> {
         let d = &self.diag;
-        if !(d.max_overlap <= self.guards.max_overlap) {
+        if d.max_overlap.is_nan() || d.max_overlap > self.guards.max_overlap {
             let (i, j) = d.max_overlap_at;
             let mut ids = vec![self.p.id[i] as usize];
             if j != usize::MAX {
@@ -744,8 +744,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         };
         if W::ON {
             for (wf, wmax, wat) in &wstats {
-                for w in 0..MAX_WALLS {
-                    diag.wall_force[w] += wf[w];
+                for (acc, w) in diag.wall_force.iter_mut().zip(wf) {
+                    *acc += *w;
                 }
                 if *wmax > diag.max_overlap {
                     diag.max_overlap = *wmax;

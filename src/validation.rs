@@ -261,7 +261,7 @@ fn momentum_and_angular_momentum_conserved() {
     let p0 = s.p.momentum();
     let scale: f64 = s.p.mass.iter().zip(&s.p.v).map(|(m, v)| m * v.norm()).sum();
     s.run(2000).unwrap();
-    assert!(s.diag.contacts > 0 || s.nl.len() > 0);
+    assert!(s.diag.contacts > 0 || !s.nl.is_empty());
     let p1 = s.p.momentum();
     assert!(
         (p1 - p0).norm() < 1e-12 * scale,

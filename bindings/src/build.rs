@@ -234,7 +234,7 @@ fn insert_spheres<'py>(
         })
         .py_err()?;
     let flat: Vec<f64> = pos.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
-    Ok(numpy::PyArray1::from_vec(py, flat).reshape([pos.len(), 3])?)
+    numpy::PyArray1::from_vec(py, flat).reshape([pos.len(), 3])
 }
 
 /// Diameters for a solid volume from a size distribution:
@@ -249,7 +249,7 @@ fn diameters_for_volume(
     use granflow::insert::SizeDist;
     let dist = match kind {
         "mono" if params.len() == 1 => SizeDist::Mono(params[0]),
-        "discrete" if params.len() >= 2 && params.len() % 2 == 0 => {
+        "discrete" if params.len() >= 2 && params.len().is_multiple_of(2) => {
             SizeDist::Discrete(params.chunks(2).map(|c| (c[0], c[1])).collect())
         }
         "uniform" if params.len() == 2 => SizeDist::Uniform(params[0], params[1]),

@@ -85,16 +85,18 @@ impl Sim {
 
 /// Read what is needed to rebuild the simulation a checkpoint came from:
 /// (scene, params JSON, positions by id, diameters by id).
-#[pyfunction]
-pub fn read_checkpoint_header<'py>(
-    py: Python<'py>,
-    path: std::path::PathBuf,
-) -> PyResult<(
+type Header<'py> = (
     String,
     String,
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray1<f64>>,
-)> {
+);
+
+#[pyfunction]
+pub fn read_checkpoint_header<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+) -> PyResult<Header<'py>> {
     let r = granflow::checkpoint::Reader::read(&path).py_err()?;
     let id = r.u32s("p.id").py_err()?;
     let x = r.f64s("p.x").py_err()?;
