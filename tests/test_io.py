@@ -51,3 +51,31 @@ def test_snapshots(tmp_path, gas, make_sim):
         assert "xyz" in str(e)
     else:
         raise AssertionError("bad format accepted")
+
+
+def test_lammps_data_roundtrip(tmp_path, gas):
+    box, x, d, v = gas
+    w = np.random.default_rng(1).normal(size=x.shape)
+    p = io.write_lammps_data(tmp_path / "in.data", x, d, 1.0, (0, 0, 0), box.length, v, w)
+    r = io.read_lammps_data(p)
+    np.testing.assert_array_equal(r["x"], x)
+    np.testing.assert_array_equal(r["diameter"], d)
+    np.testing.assert_array_equal(r["v"], v)
+    np.testing.assert_array_equal(r["omega"], w)
+    assert r["hi"] == tuple(box.length)
+    sim = io.simulation_from_lammps(p, gf.ContactLaw(kn=1e5))
+    np.testing.assert_array_equal(sim.get_velocities(), v)
+    # image flags unwrap, ids are sorted
+    (tmp_path / "img.data").write_text(
+        "x\n\n2 atoms\n1 atom types\n0 10 xlo xhi\n0 10 ylo yhi\n0 10 zlo zhi\n\n"
+        "Atoms # sphere\n\n2 1 1.0 1.0 1 1 1 1 0 0\n1 1 1.0 1.0 5 5 5 0 0 0\n"
+    )
+    r = io.read_lammps_data(tmp_path / "img.data")
+    assert r["ids"].tolist() == [1, 2] and r["x"][1, 0] == 11.0
+    (tmp_path / "bad.data").write_text("x\n\n1 atoms\n\nAtoms # atomic\n\n1 1 0 0 0\n")
+    try:
+        io.read_lammps_data(tmp_path / "bad.data")
+    except gf.GranflowIOError as e:
+        assert "sphere" in str(e)
+    else:
+        raise AssertionError("atomic style accepted")

@@ -201,3 +201,137 @@ def snapshot(sim: Any, path: str | os.PathLike, fmt: str | None = None) -> Path:
     else:
         raise ParameterError(f"invalid snapshot format {fmt!r}: allowed 'xyz' or 'vtp'")
     return path
+
+
+# -- LAMMPS data files (atom_style sphere) ------------------------------------------------
+def _r(v: Any) -> str:
+    """Shortest round-trip text of a float (numpy scalars included)."""
+    return repr(float(v))
+
+
+def write_lammps_data(
+    path: str | os.PathLike,
+    positions: np.ndarray,
+    diameters: np.ndarray,
+    density: float | np.ndarray,
+    box_lo: tuple[float, float, float],
+    box_hi: tuple[float, float, float],
+    velocities: np.ndarray | None = None,
+    omega: np.ndarray | None = None,
+    tilt: tuple[float, float, float] | None = None,
+) -> Path:
+    """Write a LAMMPS data file, ``atom_style sphere`` (id type diameter density x y z), with a
+    Velocities section (id vx vy vz wx wy wz) when velocities are given; full precision."""
+    x = np.asarray(positions, float)
+    d = np.asarray(diameters, float)
+    n = len(d)
+    rho = np.broadcast_to(np.asarray(density, float), (n,))
+    lines = ["LAMMPS data file written by granflow " + __version__, "", f"{n} atoms",
+             "1 atom types", ""]
+    for k, ax in enumerate("xyz"):
+        lines.append(f"{_r(box_lo[k])} {_r(box_hi[k])} {ax}lo {ax}hi")
+    if tilt is not None:
+        lines.append(f"{_r(tilt[0])} {_r(tilt[1])} {_r(tilt[2])} xy xz yz")
+    lines += ["", "Atoms # sphere", ""]
+    for i in range(n):
+        lines.append(f"{i + 1} 1 {_r(d[i])} {_r(rho[i])} {_r(x[i, 0])} {_r(x[i, 1])} {_r(x[i, 2])}")
+    if velocities is not None:
+        v = np.asarray(velocities, float)
+        w = np.zeros_like(v) if omega is None else np.asarray(omega, float)
+        lines += ["", "Velocities", ""]
+        for i in range(n):
+            lines.append(
+                f"{i + 1} {_r(v[i, 0])} {_r(v[i, 1])} {_r(v[i, 2])} {_r(w[i, 0])} {_r(w[i, 1])} {_r(w[i, 2])}"
+            )
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def read_lammps_data(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a LAMMPS data file with ``atom_style sphere`` atoms (``id type diameter density x y
+    z [ix iy iz]``) and an optional Velocities section. Returns arrays sorted by atom id:
+    ``ids, type, diameter, density, x, v, omega`` and the box ``lo, hi, tilt``. Positions are
+    unwrapped with image flags when present."""
+    text = Path(path).read_text().splitlines()
+    lo = [0.0, 0.0, 0.0]
+    hi = [0.0, 0.0, 0.0]
+    tilt = (0.0, 0.0, 0.0)
+    natoms = None
+    section = None
+    atoms: list[list[float]] = []
+    vels: list[list[float]] = []
+    for raw in text[1:]:
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        toks = line.split()
+        head = raw.strip().split("#")[0].strip()
+        if head in ("Atoms", "Velocities") or head.split()[0] in ("Atoms", "Velocities",
+                                                                  "Masses", "Bonds"):
+            section = head.split()[0]
+            if section == "Atoms" and "#" in raw and "sphere" not in raw.split("#", 1)[1]:
+                raise GranflowIOError(
+                    f"{path}: Atoms section is '{raw.split('#', 1)[1].strip()}', "
+                    "granflow reads atom_style sphere"
+                )
+            continue
+        if section is None:
+            if len(toks) >= 2 and toks[-1] == "atoms":
+                natoms = int(toks[0])
+            for k, ax in enumerate("xyz"):
+                if toks[-2:] == [f"{ax}lo", f"{ax}hi"]:
+                    lo[k], hi[k] = float(toks[0]), float(toks[1])
+            if toks[-3:] == ["xy", "xz", "yz"]:
+                tilt = (float(toks[0]), float(toks[1]), float(toks[2]))
+            continue
+        if section == "Atoms":
+            if len(toks) not in (7, 10):
+                raise GranflowIOError(
+                    f"{path}: atom line '{line}' has {len(toks)} columns: atom_style sphere has "
+                    "7 (id type diameter density x y z) or 10 (with image flags)"
+                )
+            atoms.append([float(t) for t in toks])
+        elif section == "Velocities":
+            vels.append([float(t) for t in toks[:7]])
+    if natoms is not None and len(atoms) != natoms:
+        raise GranflowIOError(f"{path}: header says {natoms} atoms, found {len(atoms)}")
+    if not atoms:
+        raise GranflowIOError(f"{path}: no atoms")
+    a = np.array(sorted(atoms, key=lambda r: r[0]))
+    ids = a[:, 0].astype(int)
+    x = a[:, 4:7].copy()
+    if a.shape[1] == 10:
+        L = np.asarray(hi) - np.asarray(lo)
+        x += a[:, 7:10] * L
+    out: dict[str, Any] = {
+        "ids": ids, "type": a[:, 1].astype(int), "diameter": a[:, 2], "density": a[:, 3],
+        "x": x, "v": None, "omega": None, "lo": tuple(lo), "hi": tuple(hi), "tilt": tilt,
+    }
+    if vels:
+        vm = {int(r[0]): r[1:] for r in vels}
+        vv = np.array([vm.get(i, [0.0] * 6) for i in ids])
+        out["v"], out["omega"] = vv[:, :3], vv[:, 3:6]
+    return out
+
+
+def simulation_from_lammps(path: str | os.PathLike, law: Any = None, **kw: Any) -> Any:
+    """A :class:`granflow.Simulation` from a LAMMPS data file (orthogonal periodic box unless
+    ``box=`` is given). A single density is required (granflow's particles share one)."""
+    from granflow.simulation import Box, ContactLaw, Simulation
+
+    data = read_lammps_data(path)
+    rho = np.unique(data["density"])
+    if len(rho) != 1:
+        raise ParameterError(
+            f"invalid density: {len(rho)} different values in {path}: allowed a single density"
+        )
+    if any(t != 0.0 for t in data["tilt"]):
+        raise ParameterError("invalid box: triclinic data file: allowed an orthogonal box here "
+                             "(use the cell scene for triclinic states)")
+    lo, hi = np.asarray(data["lo"]), np.asarray(data["hi"])
+    box = kw.pop("box", Box(length=tuple(hi - lo), lo=tuple(lo)))
+    return Simulation(data["x"], data["diameter"], box, law or ContactLaw(),
+                      density=float(rho[0]), velocities=data["v"],
+                      angular_velocities=data["omega"], **kw)
