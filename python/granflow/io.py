@@ -240,9 +240,8 @@ def write_lammps_data(
         w = np.zeros_like(v) if omega is None else np.asarray(omega, float)
         lines += ["", "Velocities", ""]
         for i in range(n):
-            lines.append(
-                f"{i + 1} {_r(v[i, 0])} {_r(v[i, 1])} {_r(v[i, 2])} {_r(w[i, 0])} {_r(w[i, 1])} {_r(w[i, 2])}"
-            )
+            vals = " ".join(_r(c) for c in (*v[i], *w[i]))
+            lines.append(f"{i + 1} {vals}")
     path = Path(path)
     with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
