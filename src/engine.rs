@@ -108,6 +108,17 @@ impl Body for Gravity {
     }
 }
 
+/// A raw pointer that work units share; each writes only the entries it owns.
+#[derive(Clone, Copy)]
+struct SyncPtr<T>(*mut T);
+unsafe impl<T> Sync for SyncPtr<T> {}
+unsafe impl<T> Send for SyncPtr<T> {}
+impl<T> SyncPtr<T> {
+    fn get(self) -> *mut T {
+        self.0
+    }
+}
+
 /// Per-pair result of the force loop: force on i, and q = -(r/(R_i+R_j)) n x F_t so that the
 /// torques are R_i q on i and R_j q on j.
 #[derive(Clone, Copy, Debug, Default)]
@@ -179,6 +190,14 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub(crate) kin: Vec<[f64; 8]>,
     /// Ask the next force evaluation for the virial (samplers set this).
     pub want_virial: bool,
+    /// Ask the next force evaluation for per-particle contact sums (samplers set this).
+    pub want_stats: bool,
+    /// Per particle (internal order), from the last evaluation with `want_stats`: the contact
+    /// stress sum S_i = sum_j r_ij (x) f_ij / 2 (+ r (x) f in full for wall contacts; r from the
+    /// contact point to the centre), row-major, then the power P_i = sum_j f_ij . v_ij / 2
+    /// (+ wall contacts in full; negative when dissipating).
+    pub pstats: Vec<[f64; 10]>,
+    pair_power: Vec<f64>,
     /// Per-pair forces of the last evaluation (list order).
     pub pair_out: Vec<PairOut>,
     /// 1 where the pair was in contact at the last evaluation (list order). Lets the force loop
@@ -284,6 +303,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             xr: Vec::new(),
             kin: Vec::new(),
             want_virial: false,
+            want_stats: false,
+            pstats: Vec::new(),
+            pair_power: Vec::new(),
             pair_out: Vec::new(),
             in_contact: Vec::new(),
             energy_ref: None,
@@ -503,6 +525,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let dt = self.dt;
         let hdt = 0.5 * dt;
         let want_vir = D::NEEDS_VIRIAL || self.want_virial;
+        let want_stats = self.want_stats;
+        if want_stats {
+            self.pstats.clear();
+            self.pstats.resize(self.p.len(), [0.0; 10]);
+            self.pair_power.clear();
+            self.pair_power.resize(self.nl.len(), 0.0);
+        }
         let law = &self.law;
         let dom = &self.domain;
         let p = &self.p;
@@ -537,6 +566,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let mut h: &mut [T::History] = &mut nl.hist;
             let mut o: &mut [PairOut] = &mut self.pair_out;
             let mut fl: &mut [u8] = &mut self.in_contact;
+            let mut pw: &mut [f64] = &mut self.pair_power;
+            let mut ps: &mut [[f64; 10]] = &mut self.pstats;
             for c in 0..nchunks {
                 let lo = own_start[c * PART_CHUNK] as usize;
                 let hi = own_start[((c + 1) * PART_CHUNK).min(n)] as usize;
@@ -546,7 +577,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 o = rest;
                 let (f, rest) = std::mem::take(&mut fl).split_at_mut(hi - lo);
                 fl = rest;
-                pieces.push((c, a, b, f));
+                let (pwc, psc) = if want_stats {
+                    let (x, rest) = std::mem::take(&mut pw).split_at_mut(hi - lo);
+                    pw = rest;
+                    let np = ((c + 1) * PART_CHUNK).min(n) - c * PART_CHUNK;
+                    let (y, rest) = std::mem::take(&mut ps).split_at_mut(np);
+                    ps = rest;
+                    (x, y)
+                } else {
+                    (&mut [][..], &mut [][..])
+                };
+                pieces.push((c, a, b, f, pwc, psc));
             }
         }
         // Each work unit also sums the forces of its particles' own pairs straight into
@@ -555,7 +596,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .into_par_iter()
             .zip(self.p.force.par_chunks_mut(PART_CHUNK))
             .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
-            .map(|(((c, hist, out, flag), fo), to)| {
+            .map(|(((c, hist, out, flag, pw, ps), fo), to)| {
                 let mut max_ov = 0.0f64;
                 let mut at = 0usize;
                 let mut vir = M3::zeros();
@@ -631,6 +672,16 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         if want_vir {
                             vir += d * pf.f.transpose();
                         }
+                        if want_stats {
+                            let half = 0.5 * d * pf.f.transpose();
+                            let pwr = 0.5 * pf.f.dot(&vrel);
+                            pw[kk] = pwr;
+                            let acc = &mut ps[i - i0];
+                            for (a, b) in acc.iter_mut().zip(half.transpose().iter()) {
+                                *a += b;
+                            }
+                            acc[9] += pwr;
+                        }
                     }
                     fo[i - i0] = fsum;
                     to[i - i0] = qsum;
@@ -663,6 +714,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let x = &self.p.x;
         let rad = &self.p.radius;
         let mass = &self.p.mass;
+        let pair_i = &nl.pair_i;
+        let pair_power = &self.pair_power;
+        // Per-particle statistics are written at index i by the work unit that owns i only.
+        let pstats_ptr = SyncPtr(self.pstats.as_mut_ptr());
         let body = |ci: usize,
                     fo: &mut [V3],
                     to: &mut [V3],
@@ -684,6 +739,26 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     }
                 }
                 let mut t = rad[i] * q;
+                // SAFETY: pstats has n entries when want_stats; i is owned by this work unit.
+                let mut st = if want_stats {
+                    Some(unsafe { &mut *pstats_ptr.get().add(i) })
+                } else {
+                    None
+                };
+                if let Some(acc) = st.as_deref_mut() {
+                    for r in rev_start[i]..rev_start[i + 1] {
+                        let k = rev_k[r as usize] as usize;
+                        if flags[k] != 0 {
+                            let o = pair_i[k] as usize;
+                            let d = dom.delta(&x[o], &x[i]);
+                            let half = 0.5 * d * pair_out[k].f.transpose();
+                            for (a, b) in acc.iter_mut().zip(half.transpose().iter()) {
+                                *a += b;
+                            }
+                            acc[9] += pair_power[k];
+                        }
+                    }
+                }
                 if W::ON {
                     let wl = wlaw.unwrap();
                     let hs = &mut wh.as_mut().unwrap()[l];
@@ -709,6 +784,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         f += pf.f;
                         t -= gap * nrm.cross(&pf.ft);
                         wf[w] -= pf.f;
+                        if let Some(acc) = st.as_deref_mut() {
+                            // branch vector from the contact point on the wall to the centre
+                            let full = (gap * nrm) * pf.f.transpose();
+                            for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
+                                *a += b;
+                            }
+                            acc[9] += pf.f.dot(&vrel);
+                        }
                         let ov = delta / (2.0 * ri);
                         if ov > wmax {
                             wmax = ov;
@@ -755,6 +838,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         self.diag = diag;
         self.forces_valid = true;
+        self.want_stats = false;
         let te = Instant::now();
         self.timers.pair_phase += (tp - tstart).as_secs_f64();
         self.timers.gather_phase += (te - tp).as_secs_f64();

@@ -25,6 +25,15 @@ pub trait Simulation: Send + Sync {
     fn components(&self) -> Vec<String>;
     /// Bytes held by each part (capacity of its arrays).
     fn memory(&self) -> Vec<(String, usize)>;
+    /// Ask the next force evaluation for per-particle contact sums (see `Engine::pstats`).
+    fn request_stats(&mut self);
+    /// Per-particle contact sums of the last evaluation that was asked for them (internal
+    /// order; empty if none).
+    fn particle_stats(&self) -> &[[f64; 10]];
+    /// Total force exerted by the particles on each wall at the last evaluation.
+    fn wall_forces(&self) -> Vec<crate::V3> {
+        Vec::new()
+    }
     /// Tables produced by samplers since the last call (name, table). Default: none.
     fn take_tables(&mut self) -> Vec<(String, Table)> {
         Vec::new()
@@ -196,6 +205,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     }
     fn save_checkpoint(&self, w: &mut crate::checkpoint::Writer) {
         self.save_state(w)
+    }
+    fn request_stats(&mut self) {
+        self.want_stats = true;
+    }
+    fn particle_stats(&self) -> &[[f64; 10]] {
+        &self.pstats
+    }
+    fn wall_forces(&self) -> Vec<crate::V3> {
+        self.diag.wall_force[..self.walls.planes().len()].to_vec()
     }
     fn load_checkpoint(&mut self, r: &crate::checkpoint::Reader) -> Result<()> {
         self.load_state(r)

@@ -289,6 +289,47 @@ impl Sim {
         let r = granflow::checkpoint::Reader::read(&path).py_err()?;
         self.inner.load_checkpoint(&r).py_err()
     }
+    /// Ask the next step's force evaluation for per-particle contact sums.
+    fn request_stats(&mut self) {
+        self.inner.request_stats();
+    }
+    /// Per-particle contact stress sums S_i = sum_j r_ij (x) f_ij / 2 (walls in full; (N, 9),
+    /// row-major xx xy xz yx ...) and contact power P_i = sum_j f_ij . v_ij / 2 ((N,), < 0 when
+    /// dissipating), in id order, from the last evaluation that was asked for them.
+    fn particle_stats<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
+        let p = self.inner.particles();
+        let st = self.inner.particle_stats();
+        let n = p.len();
+        if st.len() != n {
+            return Err(param_err(
+                "particle_stats",
+                "not available",
+                "call request_stats() before a step",
+            ));
+        }
+        let mut s = vec![0.0; 9 * n];
+        let mut pw = vec![0.0; n];
+        for i in 0..n {
+            let k = p.id[i] as usize;
+            s[9 * k..9 * k + 9].copy_from_slice(&st[i][..9]);
+            pw[k] = st[i][9];
+        }
+        Ok((
+            PyArray1::from_vec(py, s).reshape([n, 9])?,
+            PyArray1::from_vec(py, pw),
+        ))
+    }
+    /// Force exerted by the particles on each wall at the last evaluation ((n_walls, 3)).
+    fn wall_forces(&self) -> Vec<[f64; 3]> {
+        self.inner
+            .wall_forces()
+            .iter()
+            .map(|v| [v.x, v.y, v.z])
+            .collect()
+    }
     /// Sample tables produced since the last call.
     fn take_tables(&mut self) -> Vec<ArrowBatch> {
         self.inner
