@@ -192,6 +192,10 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub want_virial: bool,
     /// Ask the next force evaluation for per-particle contact sums (samplers set this).
     pub want_stats: bool,
+    /// Time integral of the force the particles exert on each wall (trapezoid rule, which is
+    /// exactly what velocity Verlet applies to the particles): momentum balances close to
+    /// round-off.
+    pub wall_impulse: [V3; MAX_WALLS],
     /// Per particle (internal order), from the last evaluation with `want_stats`: the contact
     /// stress sum S_i = sum_j r_ij (x) f_ij / 2 (+ r (x) f in full for wall contacts; r from the
     /// contact point to the centre), row-major, then the power P_i = sum_j f_ij . v_ij / 2
@@ -304,6 +308,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             kin: Vec::new(),
             want_virial: false,
             want_stats: false,
+            wall_impulse: [V3::zeros(); MAX_WALLS],
             pstats: Vec::new(),
             pair_power: Vec::new(),
             pair_out: Vec::new(),
@@ -414,7 +419,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.rebuild();
         }
         let t2 = Instant::now();
+        let wf_old = self.diag.wall_force;
         self.compute_forces();
+        if W::ON {
+            for (w, imp) in self.wall_impulse.iter_mut().enumerate() {
+                *imp += 0.5 * dt * (wf_old[w] + self.diag.wall_force[w]);
+            }
+        }
         let t3 = Instant::now();
         let vir = self.diag.virial;
         self.domain.integrate_final(&mut self.p, dt, &vir);

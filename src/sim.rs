@@ -34,6 +34,13 @@ pub trait Simulation: Send + Sync {
     fn wall_forces(&self) -> Vec<crate::V3> {
         Vec::new()
     }
+    /// Pair contacts of the last force evaluation: (id_i, id_j, r_ij = x_i - x_j (minimum
+    /// image), force on i), in list order.
+    fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)>;
+    /// Time integral of `wall_forces` since the start (trapezoid rule, as the integrator).
+    fn wall_impulse(&self) -> Vec<crate::V3> {
+        Vec::new()
+    }
     /// Tables produced by samplers since the last call (name, table). Default: none.
     fn take_tables(&mut self) -> Vec<(String, Table)> {
         Vec::new()
@@ -209,11 +216,27 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     fn request_stats(&mut self) {
         self.want_stats = true;
     }
+    fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)> {
+        let nl = &self.nl;
+        let mut out = Vec::with_capacity(self.diag.contacts);
+        for k in 0..nl.len() {
+            if self.in_contact[k] != 0 {
+                let i = nl.pair_i[k] as usize;
+                let j = nl.pair_j[k] as usize;
+                let d = self.domain.delta(&self.p.x[i], &self.p.x[j]);
+                out.push((self.p.id[i], self.p.id[j], d, self.pair_out[k].f));
+            }
+        }
+        out
+    }
     fn particle_stats(&self) -> &[[f64; 10]] {
         &self.pstats
     }
     fn wall_forces(&self) -> Vec<crate::V3> {
         self.diag.wall_force[..self.walls.planes().len()].to_vec()
+    }
+    fn wall_impulse(&self) -> Vec<crate::V3> {
+        self.wall_impulse[..self.walls.planes().len()].to_vec()
     }
     fn load_checkpoint(&mut self, r: &crate::checkpoint::Reader) -> Result<()> {
         self.load_state(r)
@@ -268,6 +291,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let flags: Vec<u32> = self.in_contact.iter().map(|&f| f as u32).collect();
         w.u32s("in_contact", &flags);
         w.f64s("domain", &self.domain.save_state());
+        let imp: Vec<f64> = self.wall_impulse.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+        w.f64s("walls.impulse", &imp);
+        let wf: Vec<f64> = self.diag.wall_force.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+        w.f64s("walls.force", &wf);
     }
 
     fn kind_string(&self) -> String {
@@ -365,6 +392,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .collect();
         self.in_contact = r.u32s("in_contact")?.iter().map(|&f| f as u8).collect();
         self.domain.load_state(&r.f64s("domain")?)?;
+        for (k, c) in r.f64s("walls.impulse")?.chunks_exact(3).enumerate() {
+            self.wall_impulse[k] = crate::V3::new(c[0], c[1], c[2]);
+        }
+        for (k, c) in r.f64s("walls.force")?.chunks_exact(3).enumerate() {
+            self.diag.wall_force[k] = crate::V3::new(c[0], c[1], c[2]);
+        }
         let st = r.u64s("engine.step")?;
         let tt = r.f64s("engine.time")?;
         self.step = st[0];

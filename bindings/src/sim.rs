@@ -330,6 +330,32 @@ impl Sim {
             .map(|v| [v.x, v.y, v.z])
             .collect()
     }
+    /// Pair contacts of the last force evaluation: ids (M, 2), r_ij = x_i - x_j (M, 3) and the
+    /// force on i (M, 3).
+    #[allow(clippy::type_complexity)]
+    fn contacts<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, numpy::PyArray2<i64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+    )> {
+        let c = self.inner.contacts();
+        let m = c.len();
+        let ids: Vec<i64> = c.iter().flat_map(|t| [t.0 as i64, t.1 as i64]).collect();
+        let d: Vec<f64> = c.iter().flat_map(|t| [t.2.x, t.2.y, t.2.z]).collect();
+        let f: Vec<f64> = c.iter().flat_map(|t| [t.3.x, t.3.y, t.3.z]).collect();
+        Ok((
+            PyArray1::from_vec(py, ids).reshape([m, 2])?,
+            PyArray1::from_vec(py, d).reshape([m, 3])?,
+            PyArray1::from_vec(py, f).reshape([m, 3])?,
+        ))
+    }
+    /// Time integral of the wall forces since the start ((n_walls, 3)).
+    fn wall_impulse(&self) -> Vec<[f64; 3]> {
+        self.inner.wall_impulse().iter().map(|v| [v.x, v.y, v.z]).collect()
+    }
     /// Sample tables produced since the last call.
     fn take_tables(&mut self) -> Vec<ArrowBatch> {
         self.inner
