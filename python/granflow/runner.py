@@ -69,6 +69,17 @@ def validate_spec(spec: Mapping[str, Any]) -> dict[str, Any]:
     return {**spec, "run": run, "output": out}
 
 
+def _same_run(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
+    """Two specs describe the same run if they differ at most in run.steps (so a run can be
+    extended: ``granflow run`` with more steps resumes from the checkpoint)."""
+    def strip(s: Mapping[str, Any]) -> Any:
+        c = json.loads(json.dumps(s))
+        c.get("run", {}).pop("steps", None)
+        return c
+
+    return strip(a) == strip(b)
+
+
 def _read_manifest(d: Path) -> dict[str, Any] | None:
     f = d / "manifest.json"
     if not f.exists():
@@ -99,9 +110,8 @@ def execute(
     d = Path(out)
     d.mkdir(parents=True, exist_ok=True)
     man = _read_manifest(d)
-    if man and man.get("status") == "finished" and man.get("spec") == json.loads(
-        json.dumps(spec)
-    ):
+    if (man and man.get("status") == "finished" and _same_run(man["spec"], spec)
+            and man.get("steps_done", 0) >= int(spec["run"]["steps"])):
         summ = json.loads((d / "summary.json").read_text()) if (d / "summary.json").exists() else {}
         return RunResult(d, "skipped", summ, man.get("wall_seconds", 0.0))
     cls = get_scene(spec["scene"])
@@ -110,7 +120,7 @@ def execute(
     scene = cls.from_spec(spec.get("params", {}), seed=seed, threads=threads)
     ck = d / "checkpoint.gfck"
     wall0 = 0.0
-    if ck.exists() and man is not None and man.get("spec") == json.loads(json.dumps(spec)):
+    if ck.exists() and man is not None and _same_run(man["spec"], spec):
         scene.restore(ck)
         scene.load_tables(_load_tables(d, scene._sim.time))
         wall0 = float(man.get("wall_seconds", 0.0))
