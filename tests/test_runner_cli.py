@@ -96,3 +96,23 @@ def test_sweep_on_dask_local_cluster(tmp_path):
         with distributed.Client(cluster) as client:
             df = run_grid(base, {"mu": [0.0, 0.3]}, tmp_path, seeds=[1], scheduler=client)
     assert df.height == 2 and set(df["status"]) == {"finished"}
+
+
+def test_channel_run_summary_and_plots(tmp_path, capsys):
+    spec = {
+        "scene": "channel",
+        "seed": 1,
+        "params": {"W": 8, "H": 12, "B": 4, "phi_bar": 0.6, "kn": 1e5, "dt": 3e-4,
+                   "sample_every": 20, "window": 5},
+        "run": {"steps": 2000, "checkpoint_every": 1000},
+        "output": {},
+    }
+    r = execute(spec, tmp_path / "ch", progress=False)
+    assert r.status == "finished"
+    assert (tmp_path / "ch" / "bins.parquet").exists()
+    bins = pl.read_parquet(tmp_path / "ch" / "bins.parquet")
+    assert bins["window"].n_unique() == 2000 // 20 // 5
+    assert main(["plot", str(tmp_path / "ch")]) == 0
+    pngs = sorted(p.name for p in (tmp_path / "ch" / "plots").glob("*.png"))
+    assert pngs == ["fields.png", "mu_phi_I.png", "series.png", "velocity.png"]
+    assert all((tmp_path / "ch" / "plots" / p).stat().st_size > 1000 for p in pngs)
