@@ -56,6 +56,10 @@ pub trait Domain: Clone + Send + Sync + 'static {
     }
     /// Called after every neighbour-list rebuild.
     fn on_rebuild(&mut self) {}
+    /// Named scalar observables of the domain itself (e.g. a cell's velocity gradient).
+    fn observables(&self) -> Vec<(String, f64)> {
+        Vec::new()
+    }
     /// Dynamic state for checkpoints (a static box has none).
     fn save_state(&self) -> Vec<f64> {
         Vec::new()

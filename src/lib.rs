@@ -15,6 +15,7 @@ pub mod error;
 pub mod insert;
 pub mod neighbor;
 pub mod particles;
+pub mod prcell;
 pub mod rng;
 pub mod sim;
 pub mod table;

@@ -34,6 +34,8 @@ pub trait Simulation: Send + Sync {
     fn wall_forces(&self) -> Vec<crate::V3> {
         Vec::new()
     }
+    /// Named scalar observables of the domain (empty for a static box).
+    fn domain_observables(&self) -> Vec<(String, f64)>;
     /// Pair contacts of the last force evaluation: (id_i, id_j, r_ij = x_i - x_j (minimum
     /// image), force on i), in list order.
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)>;
@@ -216,6 +218,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     fn request_stats(&mut self) {
         self.want_stats = true;
     }
+    fn domain_observables(&self) -> Vec<(String, f64)> {
+        self.domain.observables()
+    }
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)> {
         let nl = &self.nl;
         let mut out = Vec::with_capacity(self.diag.contacts);
@@ -291,9 +296,18 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let flags: Vec<u32> = self.in_contact.iter().map(|&f| f as u32).collect();
         w.u32s("in_contact", &flags);
         w.f64s("domain", &self.domain.save_state());
-        let imp: Vec<f64> = self.wall_impulse.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+        let imp: Vec<f64> = self
+            .wall_impulse
+            .iter()
+            .flat_map(|v| [v.x, v.y, v.z])
+            .collect();
         w.f64s("walls.impulse", &imp);
-        let wf: Vec<f64> = self.diag.wall_force.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+        let wf: Vec<f64> = self
+            .diag
+            .wall_force
+            .iter()
+            .flat_map(|v| [v.x, v.y, v.z])
+            .collect();
         w.f64s("walls.force", &wf);
     }
 

@@ -18,6 +18,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(insert_spheres, m)?)?;
     m.add_function(wrap_pyfunction!(diameters_for_volume, m)?)?;
     m.add_function(wrap_pyfunction!(hertz_zeta, m)?)?;
+    m.add_function(wrap_pyfunction!(cell_sim, m)?)?;
     Ok(())
 }
 
@@ -274,4 +275,49 @@ fn hertz_zeta(e_n: f64) -> PyResult<f64> {
         return Err(param_err("e_n", e_n, "0 < e_n <= 1"));
     }
     Ok(<Hertz as Form>::zeta(e_n))
+}
+
+fn cell_engine<F: Form, T: Friction>(
+    p: Particles,
+    law: LawParams,
+    cell: granflow::prcell::PrCell,
+    dt: Option<f64>,
+    skin: f64,
+) -> PyResult<Box<dyn Simulation>> {
+    let e: Engine<F, T, granflow::prcell::PrCell, NoWalls, NoBody> =
+        Engine::new(p, law, cell, NoWalls, NoBody, dt, skin).py_err()?;
+    Ok(Box::new(e))
+}
+
+/// The stress-controlled triclinic cell of 002: particles in a cubic periodic cell of side
+/// `length`, imposed p_ext and tau_ext (xy), cell mass `wg`. No walls, no gravity.
+#[pyfunction]
+#[pyo3(signature = (x, diameter, density, length, form, law, p_ext, tau_ext, wg, dt=None, skin=0.3))]
+#[allow(clippy::too_many_arguments)]
+fn cell_sim(
+    x: PyReadonlyArray2<'_, f64>,
+    diameter: PyReadonlyArray1<'_, f64>,
+    density: f64,
+    length: f64,
+    form: &str,
+    law: &Bound<'_, PyDict>,
+    p_ext: f64,
+    tau_ext: f64,
+    wg: f64,
+    dt: Option<f64>,
+    skin: f64,
+) -> PyResult<Sim> {
+    let xs = vec3_rows(&x, "positions", None)?;
+    let d = diameter.as_array().to_vec();
+    let p = Particles::new(xs, &d, density).py_err()?;
+    let law = parse_law(law, "")?;
+    let cell = granflow::prcell::PrCell::new(length, p.len(), wg, p_ext, tau_ext).py_err()?;
+    let inner = match (form, law.mu > 0.0) {
+        ("hooke", true) => cell_engine::<Hooke, Coulomb>(p, law, cell, dt, skin)?,
+        ("hooke", false) => cell_engine::<Hooke, Frictionless>(p, law, cell, dt, skin)?,
+        ("hertz", true) => cell_engine::<Hertz, Coulomb>(p, law, cell, dt, skin)?,
+        ("hertz", false) => cell_engine::<Hertz, Frictionless>(p, law, cell, dt, skin)?,
+        _ => return Err(param_err("form", form, "'hooke' or 'hertz'")),
+    };
+    Sim::new(inner, "cell")
 }

@@ -352,9 +352,17 @@ impl Sim {
             PyArray1::from_vec(py, f).reshape([m, 3])?,
         ))
     }
+    /// Named observables of the domain (the cell's L, contact and kinetic stress, flips).
+    fn domain_observables(&self) -> Vec<(String, f64)> {
+        self.inner.domain_observables()
+    }
     /// Time integral of the wall forces since the start ((n_walls, 3)).
     fn wall_impulse(&self) -> Vec<[f64; 3]> {
-        self.inner.wall_impulse().iter().map(|v| [v.x, v.y, v.z]).collect()
+        self.inner
+            .wall_impulse()
+            .iter()
+            .map(|v| [v.x, v.y, v.z])
+            .collect()
     }
     /// Sample tables produced since the last call.
     fn take_tables(&mut self) -> Vec<ArrowBatch> {

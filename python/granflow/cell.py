@@ -1,0 +1,261 @@
+"""The stress-controlled triclinic cell of 002_89269f1b918188b3 (Srivastava, Silbert, Grest &
+Lechman): a fully periodic cell driven by an imposed pressure p_ext and shear stress tau_ext
+(modularly-invariant Parrinello–Rahman, 2.10–2.16). Units: a (mean diameter), kn, t_c.
+
+Defaults (§2.5): kn = kt, gamma_n = 0.5/t_c (rate damping), gamma_t = gamma_n/2, diameters
+uniform in [0.9, 1.1] a, dt = 0.02 t_c, a dilute random start at phi = 0.05. t_c is 002's
+t_c = pi (2 kn/m_e - gamma_n^2/4)^(-1/2) for two mean particles (solved together with
+gamma_n = 0.5/t_c). Density 1 (so the mean mass is ~pi/6 kn t_c^2 / a^2 in these units).
+
+Cell mass W_g = N kn a^2 / omega_g^2. 002 prints omega_g = 2.2 sqrt(m/kn), which is a time; we
+read it as omega_g = 2.2 sqrt(kn/m) (a frequency of the order of the contact frequency), the
+default ``omega_g_factor = 2.2``; the stress fluctuations it gives are reported by the run.
+
+Observables per sample (docs/columns.md, cell series): the stress used in 002's formulas
+(4.1)–(5.4) is sigma_p = p I - dev(sigma), i.e. the compressive-positive internal stress with
+the deviatoric part taken positive along D (002 2.8: sigma = p I + mu p D/|D|).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar
+
+import numpy as np
+import pyarrow as pa
+
+from granflow import _core
+from granflow.errors import ParameterError
+from granflow.scenes import check_keys, register
+from granflow.sizes import uniform
+
+AX = "xyz"
+
+
+def contact_time_002(kn: float, m_e: float) -> tuple[float, float]:
+    """(t_c, gamma_n) with t_c = pi (2 kn/m_e - gamma_n^2/4)^(-1/2) and gamma_n = 0.5/t_c."""
+    tc = np.pi / np.sqrt(2 * kn / m_e)
+    for _ in range(100):
+        g = 0.5 / tc
+        tc = np.pi / np.sqrt(2 * kn / m_e - g * g / 4)
+    return float(tc), float(0.5 / tc)
+
+
+@register("cell")
+@dataclass
+class ShearCell:
+    """Stress-controlled cell scene (002 §2.2–2.5)."""
+
+    N: int = 2000
+    mu_s: float = 0.3
+    p_ext: float = 1e-4
+    tau_ratio: float = 0.5
+    kn: float = 1.0
+    phi0: float = 0.05
+    d_min: float = 0.9
+    d_max: float = 1.1
+    density: float = 1.0
+    omega_g_factor: float = 2.2
+    dt_frac: float = 0.02
+    skin: float = 0.3
+    sample_every: int = 200
+    seed: int = 0
+    threads: int | None = None
+
+    scene_name: ClassVar[str]
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.N, int) and self.N >= 50):
+            raise ParameterError(f"invalid N = {self.N!r}: allowed an integer >= 50")
+        if not (self.p_ext > 0):
+            raise ParameterError(f"invalid p_ext = {self.p_ext}: allowed > 0")
+        if not (0 <= abs(self.tau_ratio) <= 2):
+            raise ParameterError(
+                f"invalid tau_ratio = {self.tau_ratio}: allowed |tau_ext/p_ext| <= 2 "
+                "(beyond, the method gives no steady dense flow)")
+        if self.mu_s < 0:
+            raise ParameterError(f"invalid mu_s = {self.mu_s}: allowed >= 0")
+        if not (0 < self.phi0 <= 0.3):
+            raise ParameterError(f"invalid phi0 = {self.phi0}: allowed 0 < phi0 <= 0.3")
+        if not (0 < self.dt_frac <= 0.1):
+            raise ParameterError(f"invalid dt_frac = {self.dt_frac}: allowed 0 < dt_frac <= 0.1")
+        dist = uniform(self.d_min, self.d_max)
+        vmean = np.pi / 6 * (self.d_min + self.d_max) / 2 * (
+            self.d_min**2 + self.d_max**2) / 2  # <d^3> for a uniform distribution
+        d = dist.diameters_for_volume(self.N * vmean, self.seed)
+        vs = float(np.sum(np.pi * d**3 / 6))
+        length = (vs / self.phi0) ** (1 / 3)
+        x = np.asarray(_core.insert_spheres(d, (0, 0, 0), (length,) * 3, (True,) * 3, self.seed))
+        self.a = float(np.mean(d))
+        m_mean = float(np.mean(self.density * np.pi * d**3 / 6))
+        self.t_c, gamma_n = contact_time_002(self.kn, m_mean / 2)
+        omega_g = self.omega_g_factor * np.sqrt(self.kn / m_mean)
+        wg = len(d) * self.kn * self.a**2 / omega_g**2
+        law = {"kn": self.kn, "kt": self.kn, "xi_n": gamma_n, "xi_t_ratio": 0.5, "mu": self.mu_s}
+        self.sim = _core.cell_sim(x, d, self.density, float(length), "hooke", law,
+                                  float(self.p_ext), float(self.tau_ratio * self.p_ext),
+                                  float(wg), dt=self.dt_frac * self.t_c, skin=self.skin)
+        if self.threads:
+            self.sim.threads = int(self.threads)
+        self._d = d
+        self._vs = vs
+        self._h0 = np.asarray(self.sim.cell()[0])
+        self._rows: list[dict[str, float]] = []
+        self.pbc = (True, True, True)
+        self.wall_seconds = 0.0
+
+    @property
+    def _sim(self):
+        return self.sim
+
+    @classmethod
+    def from_spec(cls, params: Mapping[str, Any], seed: int = 0, threads: int | None = None):
+        check_keys("params", params, {f.name for f in fields(cls)} - {"seed", "threads"})
+        return cls(**dict(params), seed=seed, threads=threads)
+
+    def parameters(self) -> dict[str, Any]:
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "threads"}
+        out.update(t_c=self.t_c, a=self.a)
+        return out
+
+    # -- observables ---------------------------------------------------------------------------
+    def observe(self) -> dict[str, float]:
+        """All cell observables of the current state (docs/columns.md)."""
+        core = self.sim
+        h = np.asarray(core.cell()[0])
+        obs = dict(core.domain_observables())
+        L = np.array([[obs[f"L_{a}{b}"] for b in AX] for a in AX])
+        sc = np.array([[obs[f"sigma_c_{a}{b}"] for b in AX] for a in AX])
+        sk = np.array([[obs[f"sigma_k_{a}{b}"] for b in AX] for a in AX])
+        sig = sc + sk
+        V = float(np.linalg.det(h))
+        F = h @ np.linalg.inv(self._h0)
+        D = 0.5 * (L + L.T)
+        W = 0.5 * (L - L.T)
+        gd = float(np.sqrt(0.5 * np.sum(D * D)))
+        p = float(np.trace(sig) / 3)
+        sym = 0.5 * (sig + sig.T)
+        sp = p * np.eye(3) - (sym - p * np.eye(3))  # 002's sign: deviator along D
+        ev, evec = np.linalg.eigh(D)
+        order = np.argsort(ev)[::-1]
+        ev, evec = ev[order], evec[:, order]
+        d1h, d3h = evec[:, 0], evec[:, 2]
+        G = np.outer(d3h, d1h) - np.outer(d1h, d3h)
+        tiny = 1e-300
+        beta = abs(float(np.sum(W * G)) / (gd * float(np.sum(G * G)))) if gd > tiny else 0.0
+        sD = float(np.sum(sp * D))
+        D2 = D @ D - np.trace(D @ D) / 3 * np.eye(3)
+        DW = D @ W - W @ D
+        ok = gd > tiny and p > tiny and abs(sD) > tiny
+        mu1 = sD / (2 * gd * p) if ok else 0.0
+        mu2 = 1.5 * float(np.sum(sp * D2)) / (gd * gd * p) if ok else 0.0
+        mu3 = float(np.sum(sp * DW)) / (8 * gd * gd * p) if ok else 0.0
+        n0 = -3 * float(np.sum(sp * D2)) / (gd * sD) if ok else 0.0
+        n1 = float(np.sum(sp * DW)) / (gd * sD) if ok else 0.0
+        I = gd * self.a / np.sqrt(p / self.density) if p > tiny else 0.0  # noqa: E741
+        # fabric (5.1): <n n> = I/3 + (2/15) A over contacts
+        ids, dvec, _ = core.contacts()
+        nc = len(ids)
+        A = np.zeros((3, 3))
+        z2 = 0.0
+        theta = 0.0
+        if nc:
+            n = dvec / np.linalg.norm(dvec, axis=1)[:, None]
+            A = 7.5 * (n.T @ n / nc - np.eye(3) / 3)
+            z = np.bincount(ids.ravel(), minlength=core.n)
+            keep = np.ones(core.n, bool)
+            act = np.ones(nc, bool)
+            while True:  # remove rattlers (< 2 contacts) iteratively
+                bad = keep & (z < 2)
+                if not bad.any():
+                    break
+                keep &= ~bad
+                act &= keep[ids[:, 0]] & keep[ids[:, 1]]
+                z = np.bincount(ids[act].ravel(), minlength=core.n)
+            z2 = 2 * act.sum() / keep.sum() if keep.sum() else 0.0
+            # misalignment in the flow plane: compressive directions of D and of A (xy)
+            def angle(m: np.ndarray, largest: bool) -> float:
+                w, v = np.linalg.eigh(m[:2, :2])
+                e = v[:, -1] if largest else v[:, 0]
+                return float(np.degrees(np.arctan2(e[1], e[0])) % 180.0)
+
+            if gd > tiny:
+                diff = angle(A, True) - angle(D, False)
+                theta = float((diff + 90.0) % 180.0 - 90.0)
+        row: dict[str, float] = {"step": core.step, "t": core.time}
+        for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+            row[f"H_{AX[a]}{AX[b]}"] = h[a, b]
+        for a in range(3):
+            for b in range(3):
+                row[f"F_{AX[a]}{AX[b]}"] = F[a, b]
+        for a in range(3):
+            for b in range(3):
+                row[f"L_{AX[a]}{AX[b]}"] = L[a, b]
+        for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+            row[f"D_{AX[a]}{AX[b]}"] = D[a, b]
+        row.update(W_xy=W[0, 1], W_xz=W[0, 2], W_yz=W[1, 2], shear_rate=gd,
+                   d1=ev[0], d2=ev[1], d3=ev[2], beta=beta, phi=self._vs / V, p=p)
+        for name, m in (("sigma", sig), ("sigma_c", sc), ("sigma_k", sk)):
+            for a in range(3):
+                for b in range(3):
+                    row[f"{name}_{AX[a]}{AX[b]}"] = m[a, b]
+        row.update(mu1=mu1, mu2=mu2, mu3=mu3, I=I, N0_tau=n0, N1_tau=n1)
+        for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+            row[f"A_{AX[a]}{AX[b]}"] = A[a, b]
+        dg = core.diagnostics()
+        row.update(Z2=z2, theta_c=theta, n_contacts=float(nc), max_overlap=dg["max_overlap"],
+                   tilt_flips=obs["tilt_flips"])
+        for k, v in row.items():
+            if not np.isfinite(v):
+                raise FloatingPointError(f"non-finite cell observable {k}")
+        return row
+
+    # -- protocol ----------------------------------------------------------------------------
+    def run(self, steps: int, progress: bool | None = None, checkpoint: str | None = None,
+            checkpoint_every: int | None = None) -> None:
+        from granflow.simulation import run_chunked
+
+        target = self.sim.step + int(steps)
+        while self.sim.step < target:
+            c = min(self.sample_every - self.sim.step % self.sample_every,
+                    target - self.sim.step)
+            run_chunked(self.sim, c, progress, self)
+            if self.sim.step % self.sample_every == 0:
+                self._rows.append(self.observe())
+
+    def tables(self) -> dict[str, pa.Table]:
+        return {"series": pa.Table.from_pylist(self._rows)} if self._rows else {}
+
+    def load_tables(self, tables: Mapping[str, pa.Table]) -> None:
+        if "series" in tables:
+            self._rows = tables["series"].to_pylist()
+
+    def summary(self) -> dict[str, Any]:
+        from granflow.analysis import rheology as rh
+
+        out: dict[str, Any] = {"N": self.sim.n, "t_c": self.t_c}
+        t = self.tables()
+        if "series" not in t or t["series"].num_rows < 20:
+            return out
+        try:
+            res = rh.analyse_run(t["series"])
+        except Exception as exc:  # too little data: say so
+            out["analysis_error"] = f"{type(exc).__name__}: {exc}"
+            return out
+        out["state"] = getattr(res.state, "state", str(res.state))
+        st = res.stats
+        for k in ("mu1", "mu2", "mu3", "phi", "I", "p", "shear_rate", "beta", "N0_tau",
+                  "N1_tau", "Z2", "theta_c"):
+            row = st.filter(st["observable"] == k)
+            if row.height:
+                out[k] = float(row["mean"][0])
+                out[k + "_se"] = float(row["se"][0])
+        return out
+
+    def save_checkpoint(self, path: str | os.PathLike) -> None:
+        self.sim.save_checkpoint(os.fspath(path), "{}")
+
+    def restore(self, path: str | os.PathLike) -> None:
+        self.sim.load_checkpoint(os.fspath(path))

@@ -1,0 +1,318 @@
+//! The stress-controlled triclinic cell of 002_89269f1b918188b3 (Srivastava et al.) §2.2–2.3:
+//! a fully periodic cell H (upper-triangular, columns = cell vectors) driven by an imposed
+//! mean normal stress p_ext and shear stress tau_ext on xy, with the modularly-invariant
+//! Parrinello–Rahman equations of motion (2.10a–d; Shinoda et al. 2004).
+//!
+//! Conventions. Stresses are compressive-positive (2.11: sigma = (1/V)[sum r_ij (x) f_ij +
+//! sum m v' (x) v']). Particle velocities are stored as the peculiar velocities p_i/m_i of 2.10a
+//! (`STREAMING`): contacts add L r_ij, L = P_g/W_g = dH/dt H^-1 (2.16). The imposed stress in
+//! the compressive-positive convention is sigma_ext = p_ext I - tau_ext (e_x e_y + e_y e_x), so
+//! that tau_ext > 0 drives dH_xy/dt > 0 (v_x = L_xy y).
+//!
+//! Driving (2.10d with the reference cell updated every step, as the paper does, so that
+//! H Sigma H^T reduces to the imposed deviatoric stress): dP_g/dt = V (sigma_int - sigma_ext),
+//! keeping only the upper-triangular part (with the symmetrised internal stress this prevents
+//! cell rotation), and with the three diagonal entries all driven by the pressure difference
+//! (tr sigma_int/3 - p_ext): the diagonal dilates or compacts isotropically (F_xx = F_yy = F_zz)
+//! — 002 reports that balancing each sigma_ii separately is unstable.
+//!
+//! Integration (velocity-Verlet-like, time-reversible for the conservative part): half-kick of
+//! P_g with the stress of the previous step, half-kick of the peculiar momenta with
+//! f - L p - (tr L / 3N) p (2.10b), drift r += dt (v' + L r) and H += dt L H (so reduced
+//! coordinates only change through v'), forces, half-kick of the momenta, new internal stress,
+//! half-kick of P_g.
+//!
+//! Flips: when |H_xy| > L_x/2 (or |H_xz| > L_x/2, |H_yz| > L_y/2) the cell is replaced by the
+//! equivalent lattice (LAMMPS's flip): Cartesian positions, velocities and contact histories are
+//! unchanged, image counters are remapped, the pair list is rebuilt. Contact forces do not
+//! change (checked by a test).
+
+use crate::domain::Domain;
+use crate::error::{Error, Result};
+use crate::particles::Particles;
+use crate::{M3, V3};
+
+const MAGIC: f64 = 6_755_399_441_055_744.0;
+
+#[derive(Clone, Debug)]
+pub struct PrCell {
+    pub h: M3,
+    h_inv: M3,
+    /// Cell momentum (upper-triangular).
+    pub pg: M3,
+    /// Cell mass W_g = N kn a^2 / omega_g^2.
+    pub wg: f64,
+    pub p_ext: f64,
+    pub tau_ext: f64,
+    /// Driving of the last completed step, V (sigma_int - sigma_ext) (projected).
+    drive: M3,
+    /// Internal stress of the last completed step (contact part, kinetic part).
+    pub sigma_c: M3,
+    pub sigma_k: M3,
+    h_build: M3,
+    pub flips: u64,
+    n: usize,
+}
+
+fn upper(m: &M3) -> M3 {
+    let mut u = *m;
+    u[(1, 0)] = 0.0;
+    u[(2, 0)] = 0.0;
+    u[(2, 1)] = 0.0;
+    u
+}
+
+impl PrCell {
+    /// A cubic cell of side `l` around the particles, at rest.
+    pub fn new(l: f64, n: usize, wg: f64, p_ext: f64, tau_ext: f64) -> Result<Self> {
+        crate::error::check_positive("cell length", l)?;
+        crate::error::check_positive("p_ext", p_ext)?;
+        crate::error::check_positive("W_g (cell mass)", wg)?;
+        if !(tau_ext.is_finite() && tau_ext.abs() <= 2.0 * p_ext) {
+            return Err(Error::param(
+                "tau_ext/p_ext",
+                tau_ext / p_ext,
+                "|tau_ext/p_ext| <= 2 (beyond, no dense steady flow: the cell accelerates)",
+            ));
+        }
+        if n < 50 {
+            return Err(Error::param(
+                "N",
+                n,
+                ">= 50 particles for the periodic cell",
+            ));
+        }
+        let h = M3::from_diagonal(&V3::new(l, l, l));
+        Ok(PrCell {
+            h,
+            h_inv: h.try_inverse().unwrap(),
+            pg: M3::zeros(),
+            wg,
+            p_ext,
+            tau_ext,
+            drive: M3::zeros(),
+            sigma_c: M3::zeros(),
+            sigma_k: M3::zeros(),
+            h_build: h,
+            flips: 0,
+            n,
+        })
+    }
+
+    pub fn l_grad(&self) -> M3 {
+        self.pg / self.wg
+    }
+
+    fn set_h(&mut self, h: M3) {
+        self.h = h;
+        self.h_inv = h.try_inverse().expect("cell matrix became singular");
+    }
+
+    pub fn sigma_ext(&self) -> M3 {
+        let mut s = M3::from_diagonal(&V3::new(self.p_ext, self.p_ext, self.p_ext));
+        s[(0, 1)] = -self.tau_ext;
+        s[(1, 0)] = -self.tau_ext;
+        s
+    }
+
+    fn update_drive(&mut self, p: &Particles, virial: &M3) {
+        let v = self.volume();
+        let mut kin = M3::zeros();
+        for i in 0..p.len() {
+            kin += p.mass[i] * p.v[i] * p.v[i].transpose();
+        }
+        self.sigma_c = virial / v;
+        self.sigma_k = kin / v;
+        let sig = self.sigma_c + self.sigma_k;
+        let sym = 0.5 * (sig + sig.transpose());
+        let mut g = v * (sym - self.sigma_ext());
+        let piso = v * (sym.trace() / 3.0 - self.p_ext);
+        for k in 0..3 {
+            g[(k, k)] = piso;
+        }
+        self.drive = upper(&g);
+    }
+
+    /// Remap the cell to the equivalent lattice with the smallest tilts.
+    fn flip(&mut self, p: &mut Particles) -> bool {
+        let mut h = self.h;
+        let mut flipped = false;
+        // yz first (it changes xz by xy), then xz, then xy
+        let ly = h[(1, 1)];
+        if h[(1, 2)].abs() > 0.5 * ly {
+            let s = (h[(1, 2)] / ly).round();
+            h[(1, 2)] -= s * ly;
+            h[(0, 2)] -= s * h[(0, 1)];
+            for im in p.image.iter_mut() {
+                im[1] += s as i32 * im[2];
+            }
+            flipped = true;
+        }
+        let lx = h[(0, 0)];
+        if h[(0, 2)].abs() > 0.5 * lx {
+            let s = (h[(0, 2)] / lx).round();
+            h[(0, 2)] -= s * lx;
+            for im in p.image.iter_mut() {
+                im[0] += s as i32 * im[2];
+            }
+            flipped = true;
+        }
+        if h[(0, 1)].abs() > 0.5 * lx {
+            let s = (h[(0, 1)] / lx).round();
+            h[(0, 1)] -= s * lx;
+            for im in p.image.iter_mut() {
+                im[0] += s as i32 * im[1];
+            }
+            flipped = true;
+        }
+        if flipped {
+            self.set_h(h);
+            self.flips += 1;
+        }
+        flipped
+    }
+}
+
+impl Domain for PrCell {
+    const NAME: &'static str = "triclinic cell (Parrinello-Rahman, imposed stress)";
+    const NEEDS_VIRIAL: bool = true;
+    const STREAMING: bool = true;
+
+    fn periodic(&self) -> [bool; 3] {
+        [true; 3]
+    }
+    #[inline(always)]
+    fn streaming_velocity(&self, rij: &V3) -> V3 {
+        (self.pg * rij) / self.wg
+    }
+    #[inline(always)]
+    fn delta(&self, xi: &V3, xj: &V3) -> V3 {
+        let mut s = self.h_inv * (xi - xj);
+        for k in 0..3 {
+            s[k] -= (s[k] + MAGIC) - MAGIC;
+        }
+        self.h * s
+    }
+    fn wrap(&self, x: &mut V3, image: &mut [i32; 3]) {
+        let mut s = self.h_inv * *x;
+        let mut moved = false;
+        for k in 0..3 {
+            let f = s[k].floor();
+            if f != 0.0 {
+                s[k] -= f;
+                image[k] += f as i32;
+                moved = true;
+            }
+        }
+        if moved {
+            *x = self.h * s;
+        }
+    }
+    fn frac(&self, x: &V3) -> V3 {
+        let s = self.h_inv * x;
+        s.map(|c| (c - c.floor()).clamp(0.0, 1.0 - 1e-12))
+    }
+    fn widths(&self) -> V3 {
+        let a = self.h.column(0).into_owned();
+        let b = self.h.column(1).into_owned();
+        let c = self.h.column(2).into_owned();
+        let v = self.volume();
+        V3::new(
+            v / b.cross(&c).norm(),
+            v / c.cross(&a).norm(),
+            v / a.cross(&b).norm(),
+        )
+    }
+    fn volume(&self) -> f64 {
+        self.h.determinant()
+    }
+    fn h(&self) -> M3 {
+        self.h
+    }
+    fn origin(&self) -> V3 {
+        V3::zeros()
+    }
+
+    fn integrate_initial(&mut self, p: &mut Particles, dt: f64) {
+        let h2 = 0.5 * dt;
+        self.pg += h2 * self.drive;
+        let l = self.l_grad();
+        let tr = l.trace() / (3.0 * self.n as f64);
+        for i in 0..p.len() {
+            let v = p.v[i];
+            p.v[i] = v + h2 * (p.force[i] * p.inv_mass[i] - l * v - tr * v);
+            p.omega[i] += h2 * p.inv_inertia[i] * p.torque[i];
+        }
+        // drift: r += dt (v' + L r); H += dt L H (reduced coordinates move only with v')
+        let a = M3::identity() + dt * l;
+        for i in 0..p.len() {
+            p.x[i] = a * p.x[i] + dt * p.v[i];
+        }
+        let h = upper(&(a * self.h));
+        self.set_h(h);
+        self.flip(p);
+    }
+
+    fn integrate_final(&mut self, p: &mut Particles, dt: f64, virial: &M3) {
+        let h2 = 0.5 * dt;
+        let l = self.l_grad();
+        let tr = l.trace() / (3.0 * self.n as f64);
+        for i in 0..p.len() {
+            let v = p.v[i];
+            p.v[i] = v + h2 * (p.force[i] * p.inv_mass[i] - l * v - tr * v);
+            p.omega[i] += h2 * p.inv_inertia[i] * p.torque[i];
+        }
+        self.update_drive(p, virial);
+        self.pg += h2 * self.drive;
+    }
+
+    fn rebuild_due(&self, skin: f64) -> bool {
+        // periodic images move with the cell: bound the change of any image shift
+        let dh = self.h - self.h_build;
+        let s: f64 = (0..3).map(|k| dh.column(k).norm()).sum();
+        s > 0.25 * skin
+    }
+    fn on_rebuild(&mut self) {
+        self.h_build = self.h;
+    }
+    fn observables(&self) -> Vec<(String, f64)> {
+        let ax = ["x", "y", "z"];
+        let mut out = Vec::new();
+        let l = self.l_grad();
+        for (name, m) in [
+            ("L", &l),
+            ("sigma_c", &self.sigma_c),
+            ("sigma_k", &self.sigma_k),
+        ] {
+            for a in 0..3 {
+                for b in 0..3 {
+                    out.push((format!("{name}_{}{}", ax[a], ax[b]), m[(a, b)]));
+                }
+            }
+        }
+        out.push(("tilt_flips".into(), self.flips as f64));
+        out
+    }
+    fn save_state(&self) -> Vec<f64> {
+        let mut v = Vec::with_capacity(40);
+        v.extend(self.h.iter());
+        v.extend(self.pg.iter());
+        v.extend(self.drive.iter());
+        v.extend(self.h_build.iter());
+        v.push(self.flips as f64);
+        v
+    }
+    fn load_state(&mut self, s: &[f64]) -> Result<()> {
+        if s.len() != 37 {
+            return Err(Error::Io {
+                message: "checkpoint: cell state has the wrong size".into(),
+            });
+        }
+        self.set_h(M3::from_column_slice(&s[0..9]));
+        self.pg = M3::from_column_slice(&s[9..18]);
+        self.drive = M3::from_column_slice(&s[18..27]);
+        self.h_build = M3::from_column_slice(&s[27..36]);
+        self.flips = s[36] as u64;
+        Ok(())
+    }
+}
