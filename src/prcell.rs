@@ -103,7 +103,8 @@ impl PrCell {
         self.pg / self.wg
     }
 
-    fn set_h(&mut self, h: M3) {
+    /// Replace the cell matrix (upper-triangular).
+    pub fn set_h(&mut self, h: M3) {
         self.h = h;
         self.h_inv = h.try_inverse().expect("cell matrix became singular");
     }

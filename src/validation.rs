@@ -537,3 +537,84 @@ fn per_particle_stress_sums_to_the_virial_and_walls_count() {
     // the contact power includes the elastic part (either sign instantaneously); finite
     assert!(tot[9].is_finite());
 }
+
+#[test]
+fn cell_flip_changes_no_contact_force() {
+    use crate::prcell::PrCell;
+    // a dense-ish frictionless gas in a cell whose tilt is just below half a box length
+    let l = 8.0;
+    let mut p = gas(0.12, l, 31, SizeDist::Uniform(0.9, 1.1));
+    let law = LawParams::new(1e4, 0.8, 0.0);
+    let mut cell = PrCell::new(l, 50.max(p.len()), 1.0, 1e-3, 0.0).unwrap();
+    let mut h = cell.h;
+    h[(0, 1)] = 0.499 * l;
+    cell.set_h(h);
+    // the same reduced coordinates in the tilted cell (sheared gas: some pairs now overlap)
+    for x in p.x.iter_mut() {
+        *x = h * (*x / l);
+    }
+    let mut a: Engine<Hooke, Frictionless, PrCell, NoWalls, NoBody> =
+        Engine::new(p.clone(), law, cell.clone(), NoWalls, NoBody, None, 0.3).unwrap();
+    let mut cell2 = cell;
+    // the equivalent lattice after a flip
+    h[(0, 1)] = 0.499 * l - l;
+    cell2.set_h(h);
+    let mut b: Engine<Hooke, Frictionless, PrCell, NoWalls, NoBody> =
+        Engine::new(p, law, cell2, NoWalls, NoBody, None, 0.3).unwrap();
+    a.ensure_forces().unwrap();
+    b.ensure_forces().unwrap();
+    assert!(a.diag.contacts > 0);
+    assert_eq!(a.diag.contacts, b.diag.contacts);
+    let fa: Vec<V3> = (0..a.p.len())
+        .map(|k| {
+            let i = a.p.id.iter().position(|&q| q as usize == k).unwrap();
+            a.p.force[i]
+        })
+        .collect();
+    for k in 0..b.p.len() {
+        let i = b.p.id.iter().position(|&q| q as usize == k).unwrap();
+        let d = (b.p.force[i] - fa[k]).norm();
+        assert!(d <= 1e-9 * fa[k].norm().max(1e-6), "particle {k}: {d:e}");
+    }
+}
+
+#[test]
+fn cell_min_image_matches_brute_force_at_large_tilt() {
+    use crate::domain::Domain;
+    use crate::prcell::PrCell;
+    let l = 8.0;
+    let mut rng = Rng::new(5);
+    for &tilt in &[0.0, 0.3, 0.499, -0.499] {
+        let mut cell = PrCell::new(l, 100, 1.0, 1e-3, 0.0).unwrap();
+        let mut h = cell.h;
+        h[(0, 1)] = tilt * l;
+        h[(0, 2)] = 0.2 * tilt * l;
+        h[(1, 2)] = -0.3 * tilt * l;
+        cell.set_h(h);
+        let h = cell.h;
+        let mut c2 = cell.clone();
+        c2.set_h(h);
+        for _ in 0..2000 {
+            let xi = h * V3::new(rng.uniform(), rng.uniform(), rng.uniform());
+            let xj = h * V3::new(rng.uniform(), rng.uniform(), rng.uniform());
+            let d = c2.delta(&xi, &xj);
+            let mut best = f64::INFINITY;
+            for a in -2..=2 {
+                for b in -2..=2 {
+                    for c in -2..=2 {
+                        let img = h * V3::new(a as f64, b as f64, c as f64);
+                        best = best.min((xi - xj - img).norm());
+                    }
+                }
+            }
+            // the rounding image must be the nearest whenever that is within the cutoff range
+            if best < 2.0 {
+                assert!(
+                    (d.norm() - best).abs() < 1e-9,
+                    "tilt {tilt}: {} vs {best}",
+                    d.norm()
+                );
+            }
+        }
+    }
+}

@@ -296,6 +296,7 @@ impl Sim {
     /// Per-particle contact stress sums S_i = sum_j r_ij (x) f_ij / 2 (walls in full; (N, 9),
     /// row-major xx xy xz yx ...) and contact power P_i = sum_j f_ij . v_ij / 2 ((N,), < 0 when
     /// dissipating), in id order, from the last evaluation that was asked for them.
+    #[allow(clippy::type_complexity, clippy::needless_range_loop)]
     fn particle_stats<'py>(
         &self,
         py: Python<'py>,

@@ -43,6 +43,15 @@ def contact_time_002(kn: float, m_e: float) -> tuple[float, float]:
     return float(tc), float(0.5 / tc)
 
 
+def fabric(normals: np.ndarray) -> np.ndarray:
+    """Fabric tensor A of 002 (5.1): P(n) = (1 + A : n n)/(4 pi) gives <n n> = I/3 + 2A/15,
+    so A = 15/2 (<n n> - I/3), trace-free and symmetric. ``normals``: (M, 3) unit vectors."""
+    n = np.asarray(normals, float)
+    if len(n) == 0:
+        return np.zeros((3, 3))
+    return 7.5 * (n.T @ n / len(n) - np.eye(3) / 3)
+
+
 @register("cell")
 @dataclass
 class ShearCell:
@@ -163,7 +172,7 @@ class ShearCell:
         theta = 0.0
         if nc:
             n = dvec / np.linalg.norm(dvec, axis=1)[:, None]
-            A = 7.5 * (n.T @ n / nc - np.eye(3) / 3)
+            A = fabric(n)
             z = np.bincount(ids.ravel(), minlength=core.n)
             keep = np.ones(core.n, bool)
             act = np.ones(nc, bool)

@@ -1,0 +1,81 @@
+"""Stress-controlled cell (002): compaction, imposed stress, fabric, bad input. Small N."""
+
+import granflow as gf
+import numpy as np
+import polars as pl
+import pytest
+from granflow.analysis.errors import mean_se
+from granflow.cell import ShearCell, fabric
+
+
+def _series(c):
+    return pl.from_arrow(c.tables()["series"])
+
+
+@pytest.fixture(scope="module")
+def sheared():
+    c = ShearCell(N=300, mu_s=0.3, p_ext=1e-3, tau_ratio=0.6, sample_every=100, seed=3)
+    c.run(60_000)
+    return c
+
+
+def test_tau_zero_compacts_isotropically_without_shear():
+    c = ShearCell(N=200, mu_s=0.3, p_ext=1e-3, tau_ratio=0.0, sample_every=100, seed=2)
+    c.run(30_000)
+    s = _series(c)
+    last = s.tail(50)
+    assert last["phi"].mean() > 0.5  # compacted from 0.05
+    # isotropic: F_xx = F_yy = F_zz, no tilt drift
+    for a, b in (("F_xx", "F_yy"), ("F_xx", "F_zz")):
+        assert np.allclose(last[a], last[b], rtol=1e-12)
+    # no drift of the tilt once compacted (a transient shear during compaction stays put)
+    assert last["F_xy"].max() - last["F_xy"].min() < 1e-3
+    assert np.abs(last["F_xy"]).max() < 0.25
+    # the shear rate vanishes within its error: the L_xy mean is zero within 3 SE
+    m = mean_se(last["L_xy"].to_numpy())
+    assert abs(m.mean) < 3 * m.se + 1e-9
+    # the internal pressure balances the imposed one
+    assert last["p"].mean() == pytest.approx(1e-3, rel=0.1)
+
+
+def test_steady_flow_holds_the_imposed_stress(sheared):
+    s = _series(sheared)
+    steady = s.tail(s.height // 2)
+    p = mean_se(steady["p"].to_numpy())
+    sxy = mean_se(steady["sigma_xy"].to_numpy())
+    assert abs(p.mean - 1e-3) < max(4 * p.se, 0.03e-3)
+    assert abs(-sxy.mean - 0.6e-3) < max(4 * sxy.se, 0.03e-3)
+    # simple shear in the flow plane
+    assert steady["beta"].mean() > 0.9
+    assert steady["tilt_flips"].max() > 0  # the tilt grew past half a box and was remapped
+    assert steady["mu1"].mean() > 0.3 and steady["shear_rate"].mean() > 0
+    for col in s.columns:
+        assert s[col].is_finite().all()
+
+
+def test_fabric_of_hand_built_contacts():
+    ex = np.array([[1.0, 0, 0], [-1.0, 0, 0]])
+    np.testing.assert_allclose(fabric(ex), np.diag([5.0, -2.5, -2.5]))
+    iso = np.vstack([np.eye(3), -np.eye(3)])
+    np.testing.assert_allclose(fabric(iso), 0.0, atol=1e-15)
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(200_000, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    assert np.abs(fabric(n)).max() < 0.05
+    assert abs(np.trace(fabric(ex))) < 1e-12
+
+
+def test_scene_contains_only_what_it_needs():
+    c = ShearCell(N=60, p_ext=1e-3, sample_every=10)
+    comps = c.sim.components()
+    assert any("triclinic" in x for x in comps)
+    assert not any("walls" in x or "gravity" in x for x in comps)
+    assert dict(c.sim.memory())["wall history"] == 0
+
+
+@pytest.mark.parametrize(
+    "kw, name", [({"p_ext": 0.0}, "p_ext"), ({"tau_ratio": 3.0}, "tau_ratio"), ({"N": 10}, "N")]
+)
+def test_bad_input(kw, name):
+    with pytest.raises(gf.ParameterError, match=name):
+        ShearCell(**kw)
