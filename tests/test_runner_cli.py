@@ -116,3 +116,15 @@ def test_channel_run_summary_and_plots(tmp_path, capsys):
     pngs = sorted(p.name for p in (tmp_path / "ch" / "plots").glob("*.png"))
     assert pngs == ["fields.png", "mu_phi_I.png", "series.png", "velocity.png"]
     assert all((tmp_path / "ch" / "plots" / p).stat().st_size > 1000 for p in pngs)
+
+
+def test_example_toml_files_validate():
+    from pathlib import Path
+
+    from granflow.runner import load_spec, validate_spec
+
+    root = Path(__file__).parent.parent / "examples"
+    files = sorted(root.glob("*.toml"))
+    assert {f.name for f in files} >= {"channel.toml", "cell.toml"}
+    for f in files:
+        validate_spec(load_spec(f))
