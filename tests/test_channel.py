@@ -112,3 +112,15 @@ def test_no_nan_in_tables(flowing):
             a = col.to_numpy()
             if a.dtype.kind == "f":
                 assert np.isfinite(a).all()
+
+
+def test_channel_checkpoint_restart_is_bitwise(tmp_path):
+    a = Channel(W=6, H=8, B=3.5, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4, sample_every=50, window=4)
+    a.run(500)
+    a.save_checkpoint(tmp_path / "c.gfck")
+    a.run(500)
+    b = Channel(W=6, H=8, B=3.5, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4, sample_every=50, window=4)
+    b.restore(tmp_path / "c.gfck")
+    b.run(500)
+    assert np.array_equal(a._sim.positions(), b._sim.positions())
+    assert np.array_equal(a._sim.angular_velocities(), b._sim.angular_velocities())
