@@ -49,6 +49,7 @@ def main() -> None:
     man = out / "manifest.json"
     if man.exists():
         steps = json.loads(man.read_text()).get("steps_done", 0)
+    prev_u = 0.0
     while steps * dt < a.max_time:
         steps += chunk
         spec["run"]["steps"] = steps
@@ -60,9 +61,12 @@ def main() -> None:
               f"u_max = {s.get('u_max', float('nan')):.4g} ± {s.get('u_max_se') or 0:.2g}  "
               f"u_max/u_slip = {s.get('u_max_over_u_slip', float('nan')):.4g}  "
               f"({time.perf_counter() - t0:.0f} s, total {r.wall_seconds:.0f} s)", flush=True)
-        if s.get("flow_state") in ("arrested", "accelerating") and steps * dt >= 3 * a.chunk_time:
+        u = s.get("u_max", float("nan"))
+        free_fall = s.get("flow_state") == "accelerating" and u > 1.2 * prev_u > 0
+        if steps * dt >= 3 * a.chunk_time and (s.get("flow_state") == "arrested" or free_fall):
             print(f"flow {s['flow_state']}: stopping")
             break
+        prev_u = u
     try:
         from granflow.plotting import plot_run
 

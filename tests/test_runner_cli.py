@@ -128,3 +128,12 @@ def test_example_toml_files_validate():
     assert {f.name for f in files} >= {"channel.toml", "cell.toml"}
     for f in files:
         validate_spec(load_spec(f))
+
+
+def test_sweep_records_a_failing_run_and_goes_on(tmp_path):
+    base = {**GAS, "run": {"steps": 100}, "output": {}}
+    # kn so small that the gas overlaps beyond the guard: that run fails, the other finishes
+    df = run_grid(base, {"kn": [1e4, 1e-3]}, tmp_path, seeds=[1], workers=1)
+    st = dict(zip(df["kn"].to_list(), df["status"].to_list(), strict=True))
+    assert st[1e4] == "finished" and st[1e-3] == "failed"
+    assert "Error" in df.filter(pl.col("kn") == 1e-3)["error"][0]

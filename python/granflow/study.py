@@ -18,7 +18,7 @@ from typing import Any
 
 import polars as pl
 
-from granflow.errors import ParameterError
+from granflow.errors import GranflowError, ParameterError
 from granflow.io import hive_dir
 from granflow.runner import execute, validate_spec
 
@@ -44,7 +44,13 @@ def expand(
 
 
 def _one(spec: dict[str, Any], directory: str, threads: int) -> dict[str, Any]:
-    r = execute(spec, directory, progress=False, threads=threads)
+    """Run one point of the grid; a run that fails (e.g. goes unstable) is recorded with its
+    error message instead of stopping the sweep."""
+    try:
+        r = execute(spec, directory, progress=False, threads=threads)
+    except GranflowError as exc:
+        return {"status": "failed", "error": f"{type(exc).__name__}: {exc}",
+                "directory": directory}
     row = {"status": r.status, "wall_seconds": r.wall_seconds, "directory": str(r.directory)}
     for k, v in r.summary.items():
         if isinstance(v, (int, float, str, bool)) or v is None:
