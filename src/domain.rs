@@ -56,6 +56,11 @@ pub trait Domain: Clone + Send + Sync + 'static {
     }
     /// Called after every neighbour-list rebuild.
     fn on_rebuild(&mut self) {}
+    /// Run-time guard, called once per step after `integrate_initial`: a domain that found its
+    /// state unusable (e.g. a deforming cell too thin for the minimum image) reports it here.
+    fn check(&self, _step: u64) -> Result<()> {
+        Ok(())
+    }
     /// Named scalar observables of the domain itself (e.g. a cell's velocity gradient).
     fn observables(&self) -> Vec<(String, f64)> {
         Vec::new()

@@ -413,6 +413,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let dt = self.dt;
         let t0 = Instant::now();
         self.domain.integrate_initial(&mut self.p, dt);
+        self.domain.check(self.step)?;
         self.wrap_all();
         let t1 = Instant::now();
         if self.nl.needs_rebuild(&self.p, &self.domain) || self.domain.rebuild_due(self.nl.skin) {

@@ -52,6 +52,9 @@ pub struct PrCell {
     h_build: M3,
     pub flips: u64,
     n: usize,
+    /// Smallest volume seen (for the runaway-dilation guard) and the largest diameter.
+    v_ref: f64,
+    pub d_max: f64,
 }
 
 fn upper(m: &M3) -> M3 {
@@ -96,6 +99,8 @@ impl PrCell {
             h_build: h,
             flips: 0,
             n,
+            v_ref: l * l * l,
+            d_max: 0.0,
         })
     }
 
@@ -265,6 +270,40 @@ impl Domain for PrCell {
         }
         self.update_drive(p, virial);
         self.pg += h2 * self.drive;
+        self.v_ref = self.v_ref.min(self.volume());
+    }
+
+    fn check(&self, step: u64) -> Result<()> {
+        // A stress ratio above what the material can sustain makes the cell dilate and shear
+        // without bound (a run that keeps accelerating); stop it before the packing dissolves.
+        let phi_ratio = self.v_ref / self.volume();
+        if phi_ratio < 0.05 {
+            return Err(Error::Instability {
+                step,
+                particles: vec![],
+                message: format!(
+                    "the cell dilated {:.0}-fold from its densest state (tau_ext/p_ext = {:.3})",
+                    1.0 / phi_ratio,
+                    self.tau_ext / self.p_ext
+                ),
+                cause: "the imposed stress ratio is above the largest the material sustains in \
+                        steady flow: the flow accelerates and dilutes (not steady, not averaged)"
+                    .into(),
+            });
+        }
+        let w = self.widths();
+        let lmin = w.x.min(w.y).min(w.z);
+        if lmin < 3.0 * self.d_max {
+            return Err(Error::Instability {
+                step,
+                particles: vec![],
+                message: format!("the cell became too thin: smallest width {lmin:.3} < 3 d_max"),
+                cause: "a collapse of the cell under the imposed stress (too few particles, or \
+                        p_ext too large for kn)"
+                    .into(),
+            });
+        }
+        Ok(())
     }
 
     fn rebuild_due(&self, skin: f64) -> bool {

@@ -311,7 +311,8 @@ fn cell_sim(
     let d = diameter.as_array().to_vec();
     let p = Particles::new(xs, &d, density).py_err()?;
     let law = parse_law(law, "")?;
-    let cell = granflow::prcell::PrCell::new(length, p.len(), wg, p_ext, tau_ext).py_err()?;
+    let mut cell = granflow::prcell::PrCell::new(length, p.len(), wg, p_ext, tau_ext).py_err()?;
+    cell.d_max = 2.0 * p.max_radius();
     let inner = match (form, law.mu > 0.0) {
         ("hooke", true) => cell_engine::<Hooke, Coulomb>(p, law, cell, dt, skin)?,
         ("hooke", false) => cell_engine::<Hooke, Frictionless>(p, law, cell, dt, skin)?,
