@@ -74,6 +74,9 @@ def main() -> None:
             print("wrote", p)
     except Exception as exc:  # plots are a convenience; the data are written already
         print(f"plots skipped: {type(exc).__name__}: {exc}")
+    errs = out / "errors.txt"
+    if errs.exists():
+        print("\nstandard error against run time:\n" + errs.read_text())
     lines = [f"{k}: {v}" for k, v in sorted(r.summary.items())]
     (out / "summary.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -36,6 +36,9 @@ def main() -> None:
     for k in ("u_slip", "u_max", "delta_095", "u_max_over_u_slip", "sigma_xx_mean"):
         if k in s:
             print(f"  {k:18s} {s[k]:.4g} ± {s.get(k + '_se') or 0:.2g}")
+    errs = r.directory / "errors.txt"
+    if errs.exists():
+        print("\nstandard error against run time:\n" + errs.read_text())
     for p in plot_run(r.directory):
         print("figure:", p)
 

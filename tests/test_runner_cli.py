@@ -116,6 +116,11 @@ def test_channel_run_summary_and_plots(tmp_path, capsys):
     pngs = sorted(p.name for p in (tmp_path / "ch" / "plots").glob("*.png"))
     assert pngs == ["fields.png", "mu_phi_I.png", "series.png", "velocity.png"]
     assert all((tmp_path / "ch" / "plots" / p).stat().st_size > 1000 for p in pngs)
+    # error against run time written beside the results
+    assert (tmp_path / "ch" / "errors.txt").exists()
+    if (tmp_path / "ch" / "errors.parquet").exists():
+        errs = pl.read_parquet(tmp_path / "ch" / "errors.parquet")
+        assert errs.height > 0
 
 
 def test_example_toml_files_validate():

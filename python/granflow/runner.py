@@ -91,6 +91,8 @@ def _load_tables(d: Path, upto_time: float) -> dict[str, pa.Table]:
     """Tables written with the last checkpoint, without rows newer than it."""
     out: dict[str, pa.Table] = {}
     for f in d.glob("*.parquet"):
+        if f.stem.startswith("errors"):
+            continue
         t = pq.read_table(f)
         tcol = "t1" if "t1" in t.column_names else ("t" if "t" in t.column_names else None)
         if tcol is not None:
@@ -174,4 +176,15 @@ def execute(
     with io.atomic_path(d / "summary.json") as tmp:
         tmp.write_text(json.dumps(io._jsonable(summary), indent=1, sort_keys=True))
     save_all("finished")
+    if spec["scene"] in ("channel", "cell"):
+        # statistical error against run time, beside the results (errors.parquet, errors.txt)
+        try:
+            from granflow.analysis.report import error_report_for_run
+
+            rep = error_report_for_run(d)
+            with io.atomic_path(d / "errors.txt") as tmp:
+                tmp.write_text(rep.text() + "\n")
+        except Exception as exc:  # too little data for block analysis: say so, keep the run
+            with io.atomic_path(d / "errors.txt") as tmp:
+                tmp.write_text(f"error report not available: {type(exc).__name__}: {exc}\n")
     return RunResult(d, "finished", summary, manifest["wall_seconds"])

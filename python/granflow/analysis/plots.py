@@ -16,6 +16,7 @@ import numpy as np
 import polars as pl
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from . import channel as ch
 from . import rheology as rh
@@ -300,10 +301,16 @@ def plot_cell_rheology(
 # errors
 # --------------------------------------------------------------------------------------------
 @quiet
-def plot_se_vs_time(results: SEvsTime | Mapping[str, SEvsTime], path: PathLike) -> Path:
+def plot_se_vs_time(
+    results: SEvsTime | Mapping[str, SEvsTime],
+    path: PathLike,
+    *,
+    ylabel: str = "standard error",
+    target: float | None = None,
+) -> Path:
     """SE vs simulated averaging time (log-log) with the fitted ``C / sqrt(T)`` line; open
     symbols mark prefixes whose blocking did not converge.  A top axis shows wall-clock time
-    when the wall rate is known (first result)."""
+    when the wall rate is known (first result); ``target`` draws a dashed horizontal line."""
     res = {"": results} if isinstance(results, SEvsTime) else dict(results)
     fig = Figure(figsize=(6, 4.5))
     ax = fig.add_subplot(1, 1, 1)
@@ -332,16 +339,20 @@ def plot_se_vs_time(results: SEvsTime | Mapping[str, SEvsTime], path: PathLike) 
             )
         if wall is None and r.wall_time_per_unit_t:
             wall = float(r.wall_time_per_unit_t)
+    if target is not None and target > 0:
+        ax.axhline(target, color="k", ls="--", lw=0.8, label=f"target {target:.3g}")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("simulated averaging time T")
-    ax.set_ylabel("standard error")
+    ax.set_ylabel(ylabel)
     if wall:
         w = wall
         sec = ax.secondary_xaxis("top", functions=(lambda t: t * w, lambda s: s / w))
+        sec.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap
         sec.set_xlabel("wall-clock time [s]")
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=7)
+    handles = ax.get_legend_handles_labels()[0]
+    if handles:
+        ax.legend(fontsize=6 if len(handles) > 6 else 7, ncol=2 if len(handles) > 6 else 1)
     return _save(fig, path)
 
 
