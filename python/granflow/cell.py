@@ -11,9 +11,10 @@ Cell mass W_g = N kn a^2 / omega_g^2. 002 prints omega_g = 2.2 sqrt(m/kn), which
 read it as omega_g = 2.2 sqrt(kn/m) (a frequency of the order of the contact frequency), the
 default ``omega_g_factor = 2.2``; the stress fluctuations it gives are reported by the run.
 
-Observables per sample (docs/columns.md, cell series): the stress used in 002's formulas
-(4.1)–(5.4) is sigma_p = p I - dev(sigma), i.e. the compressive-positive internal stress with
-the deviatoric part taken positive along D (002 2.8: sigma = p I + mu p D/|D|).
+Observables per sample (docs/columns.md, cell series) follow 002's sign conventions: the stress
+is compressive-positive (2.11) and so is the strain rate, D = -sym(L), W = -skew(L) (002: a
+positive eigenvalue sum is compaction); the L_ab columns stay kinematic (2.16). With these,
+(4.1)–(5.4) hold as printed: mu1 > 0, mu2 = -N0/p, N1/tau = 4 mu3/mu1.
 """
 
 from __future__ import annotations
@@ -141,12 +142,13 @@ class ShearCell:
         sig = sc + sk
         V = float(np.linalg.det(h))
         F = h @ np.linalg.inv(self._h0)
-        D = 0.5 * (L + L.T)
-        W = 0.5 * (L - L.T)
+        # 002's convention: strain rate compressive-positive (D = -sym L, W = -skew L), with the
+        # compressive-positive stress; (4.1)-(5.4) then hold as printed (mu1 > 0, mu2 = -N0/p)
+        D = -0.5 * (L + L.T)
+        W = -0.5 * (L - L.T)
         gd = float(np.sqrt(0.5 * np.sum(D * D)))
         p = float(np.trace(sig) / 3)
-        sym = 0.5 * (sig + sig.T)
-        sp = p * np.eye(3) - (sym - p * np.eye(3))  # 002's sign: deviator along D
+        sp = 0.5 * (sig + sig.T)
         ev, evec = np.linalg.eigh(D)
         order = np.argsort(ev)[::-1]
         ev, evec = ev[order], evec[:, order]
@@ -191,7 +193,7 @@ class ShearCell:
                 return float(np.degrees(np.arctan2(e[1], e[0])) % 180.0)
 
             if gd > tiny:
-                diff = angle(A, True) - angle(D, False)
+                diff = angle(A, True) - angle(D, True)
                 theta = float((diff + 90.0) % 180.0 - 90.0)
         row: dict[str, float] = {"step": core.step, "t": core.time}
         for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
