@@ -142,3 +142,26 @@ def test_sweep_records_a_failing_run_and_goes_on(tmp_path):
     st = dict(zip(df["kn"].to_list(), df["status"].to_list(), strict=True))
     assert st[1e4] == "finished" and st[1e-3] == "failed"
     assert "Error" in df.filter(pl.col("kn") == 1e-3)["error"][0]
+
+
+def test_failed_run_keeps_what_it_recorded(tmp_path):
+    spec = {**GAS, "params": {**GAS["params"], "sample_every": 10}, "run": {"steps": 100_000},
+            "output": {}}
+    import granflow.scenes as sc
+
+    orig = sc.PeriodicGas._sample
+
+    def boom(self):
+        orig(self)
+        if self.sim.step >= 200:
+            raise gf.InstabilityError("instability at step 200: test")
+
+    sc.PeriodicGas._sample = boom
+    try:
+        with pytest.raises(gf.InstabilityError):
+            execute(spec, tmp_path / "f", progress=False)
+    finally:
+        sc.PeriodicGas._sample = orig
+    man = json.loads((tmp_path / "f" / "manifest.json").read_text())
+    assert man["status"] == "failed"
+    assert pl.read_parquet(tmp_path / "f" / "series.parquet").height == 20

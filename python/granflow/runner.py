@@ -25,7 +25,7 @@ import pyarrow.parquet as pq
 
 from granflow import io
 from granflow._core import __version__
-from granflow.errors import ParameterError
+from granflow.errors import GranflowError, ParameterError
 from granflow.scenes import check_keys, get_scene
 
 RUN_KEYS = {"steps": 0, "chunk": 0, "checkpoint_every": 0}
@@ -169,6 +169,15 @@ def execute(
                 save_all("running")
     except (KeyboardInterrupt, SystemExit):
         save_all("interrupted")
+        raise
+    except GranflowError:
+        # an unstable run stops with a clear error; what it recorded stays readable
+        if outp.get("tables", True):
+            for name, t in scene.tables().items():
+                io.write_parquet(t, d / f"{name}.parquet", params=params, seed=seed)
+        manifest.update(status="failed", steps_done=scene._sim.step,
+                        wall_seconds=wall0 + time.perf_counter() - t0)
+        io.write_manifest(d, manifest)
         raise
     summary = scene.summary()
     summary["wall_seconds"] = wall0 + time.perf_counter() - t0
