@@ -124,3 +124,4 @@ def test_channel_checkpoint_restart_is_bitwise(tmp_path):
     b.run(500)
     assert np.array_equal(a._sim.positions(), b._sim.positions())
     assert np.array_equal(a._sim.angular_velocities(), b._sim.angular_velocities())
+    assert b.prep_info == a.prep_info and b.achieved_phi_bar == a.achieved_phi_bar

@@ -36,6 +36,7 @@ Statistics (000 eqs 2.1–2.5), sampled every ``sample_every`` steps and average
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
@@ -465,11 +466,21 @@ class Channel:
         return out
 
     def save_checkpoint(self, path: str | os.PathLike) -> None:
+        from granflow.io import atomic_path
+
         if self.sim is None:
             self.prepare()
+        # the preparation record rides beside the kernel checkpoint (written first: a
+        # checkpoint never exists without it)
+        with atomic_path(f"{os.fspath(path)}.prep.json") as tmp:
+            tmp.write_text(json.dumps(self.prep_info))
         self.sim.save_checkpoint(path)
 
     def restore(self, path: str | os.PathLike) -> None:
         self.sim = Simulation.from_checkpoint(path, threads=self.threads)
+        prep = f"{os.fspath(path)}.prep.json"
+        if os.path.exists(prep):
+            with open(prep) as f:
+                self.prep_info = json.load(f)
         self._cache_static()
         self._win = None
