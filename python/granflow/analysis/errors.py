@@ -448,7 +448,10 @@ def ratio_se(
     bb = np.asarray(b, dtype=np.float64)
     ok = np.isfinite(aa) & np.isfinite(bb)
     aa, bb = aa[ok], bb[ok]
-    mb = float(np.mean(bb))
+    mb = float(np.mean(bb)) if len(bb) else 0.0
+    if mb == 0.0:
+        # the ratio is undefined (e.g. no wall contact yet): say so instead of dividing by 0
+        return MeanSE(float("nan"), float("nan"), float("nan"), False, len(aa))
     r = float(np.mean(aa)) / mb
     z = (aa - r * bb) / mb
     blk = blocking(z, dt, min_blocks=min_blocks)
