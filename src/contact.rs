@@ -125,6 +125,8 @@ pub trait Form: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
     const NAME: &'static str;
     /// (spring factor s, dashpot factor s_d) for overlap delta and pair mean diameter d.
     fn factors(delta: f64, d: f64, tsuji: bool) -> (f64, f64);
+    /// Elastic energy stored in a contact of overlap delta (the spring's integral).
+    fn elastic_energy(kn: f64, delta: f64, d: f64) -> f64;
     /// Dimensionless damping zeta = c / sqrt(kn m_eff) that gives restitution e_n.
     fn zeta(e_n: f64) -> f64 {
         LawParams::zeta(e_n)
@@ -135,6 +137,9 @@ pub trait Form: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
 pub struct Hooke;
 impl Form for Hooke {
     const NAME: &'static str = "hooke";
+    fn elastic_energy(kn: f64, delta: f64, _: f64) -> f64 {
+        0.5 * kn * delta * delta
+    }
     #[inline(always)]
     fn factors(_: f64, _: f64, _: bool) -> (f64, f64) {
         (1.0, 1.0)
@@ -149,6 +154,10 @@ impl Form for Hooke {
 pub struct Hertz;
 impl Form for Hertz {
     const NAME: &'static str = "hertz";
+    /// integral of kn (x/d)^(1/2) x dx = 2/5 kn x^(5/2) / d^(1/2)
+    fn elastic_energy(kn: f64, delta: f64, d: f64) -> f64 {
+        0.4 * kn * delta * delta * (delta / d).sqrt()
+    }
     #[inline(always)]
     fn factors(delta: f64, d: f64, tsuji: bool) -> (f64, f64) {
         let s = (delta / d).sqrt();

@@ -138,7 +138,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let r = self.domain.delta(&self.p.x[i], &self.p.x[j]).norm();
             let delta = rs - r;
             if delta > 0.0 {
-                u += elastic::<F>(kn, delta, rs);
+                u += F::elastic_energy(kn, delta, rs);
             }
         }
         if let Some(wl) = self.walls.law() {
@@ -148,22 +148,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 for pl in self.walls.planes() {
                     let gap = pl.sign * (self.p.x[i][pl.axis] - pl.pos);
                     if gap < ri {
-                        u += elastic::<F>(kw, ri - gap, 2.0 * ri);
+                        u += F::elastic_energy(kw, ri - gap, 2.0 * ri);
                     }
                 }
             }
         }
         u
-    }
-}
-
-fn elastic<F: Form>(kn: f64, delta: f64, d: f64) -> f64 {
-    let (s, _) = F::factors(delta, d, false);
-    if s == 1.0 {
-        0.5 * kn * delta * delta
-    } else {
-        // integral of kn (x/d)^(1/2) x dx = 2/5 kn x^(5/2) / d^(1/2)
-        0.4 * kn * delta * delta * s
     }
 }
 
