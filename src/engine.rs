@@ -318,7 +318,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         };
         e.wrap_all();
         e.rebuild();
-        e.compute_forces();
+        e.compute_forces_setup();
         if e.diag.max_overlap > e.guards.max_overlap {
             let (i, j) = e.diag.max_overlap_at;
             let who = if j == usize::MAX {
@@ -394,7 +394,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             if self.nl.needs_rebuild(&self.p, &self.domain) {
                 self.rebuild();
             }
-            self.compute_forces();
+            self.compute_forces_setup();
             self.check_overlap()?;
         }
         Ok(())
@@ -531,10 +531,23 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         Ok(())
     }
 
-    /// Evaluate all forces and torques for the current positions and velocities.
+    /// Evaluate all forces and torques for the current positions and velocities, advancing
+    /// the tangential histories by one step (the evaluation inside a time step).
     pub fn compute_forces(&mut self) {
+        self.evaluate(self.dt);
+    }
+
+    /// Evaluate forces without advancing any tangential history: no time has passed (the first
+    /// evaluation, or after the state was set from outside). As LAMMPS's setup, which skips
+    /// the history update.
+    pub fn compute_forces_setup(&mut self) {
+        self.evaluate(0.0);
+    }
+
+    /// `hist_dt`: the time over which the histories are advanced (dt in a step, 0 at set-up).
+    fn evaluate(&mut self, hist_dt: f64) {
         let tstart = Instant::now();
-        let dt = self.dt;
+        let dt = hist_dt;
         let hdt = 0.5 * dt;
         let want_vir = D::NEEDS_VIRIAL || self.want_virial;
         let want_stats = self.want_stats;
