@@ -1,69 +1,128 @@
-//! Step throughput on a packing file (f64 LE: N, Lx, Ly, Lz, then x y z d per particle),
-//! for profiling (`valgrind --tool=callgrind`) and quick timing:
+//! Step throughput on a state file, for profiling (`valgrind --tool=callgrind`) and quick timing:
 //!     cargo bench --bench step -- FILE STEPS THREADS [mu]
-use granflow::contact::{Coulomb, Frictionless, Hooke, LawParams};
+//! File (f64 little-endian): kind (0 periodic packing, 1 channel), N, Lx, Ly, Lz, dt, then per
+//! particle x y z vx vy vz wx wy wz d. A channel has walls at x = 0 and x = Lx (same law as the
+//! pairs), periodic y and z, gravity -1 along y (000's channel). `benchmarks/kernel_state.py`
+//! writes such files.
+use granflow::contact::{Coulomb, Form, Friction, Frictionless, Hooke, LawParams};
 use granflow::domain::OrthoBox;
-use granflow::engine::{Engine, NoBody, NoWalls};
+use granflow::engine::{Body, Engine, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
 use granflow::particles::Particles;
 use granflow::V3;
 use std::time::Instant;
 
+fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
+    p: Particles,
+    law: LawParams,
+    bx: OrthoBox,
+    walls: W,
+    body: G,
+    dt: f64,
+    steps: u64,
+) {
+    let mut e: Engine<Hooke, T, OrthoBox, W, G> =
+        Engine::new(p, law, bx, walls, body, Some(dt), 0.2).unwrap();
+    e.run(10).unwrap();
+    e.timers = Default::default();
+    let b0 = e.nl.builds;
+    let t0 = Instant::now();
+    let c0 = cpu_seconds();
+    e.run(steps).unwrap();
+    let el = t0.elapsed().as_secs_f64();
+    let cpu = cpu_seconds() - c0;
+    let n = e.p.len();
+    println!(
+        "{:?}\npairs/particle {:.2} cross {:.2} contacts/particle {:.2} builds {} kernel B/particle {:.0}",
+        e.timers,
+        e.nl.len() as f64 / n as f64,
+        e.nl.n_cross() as f64 / e.nl.len() as f64,
+        e.diag.contacts as f64 / n as f64,
+        e.nl.builds - b0,
+        e.memory_list().iter().map(|(_, b)| *b as f64).sum::<f64>() / n as f64
+    );
+    println!(
+        "N={n} steps={steps} {}: {:.3e} particle-steps/s wall, {:.3e} per CPU-second",
+        <Hooke as Form>::NAME,
+        n as f64 * steps as f64 / el,
+        n as f64 * steps as f64 / cpu
+    );
+}
+
+/// User + system CPU time of this process (from /proc/self/stat, clock ticks of 10 ms): on a
+/// loaded machine, the time the process actually ran.
+fn cpu_seconds() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = s.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = after.split_whitespace().collect();
+    let t = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (t(11) + t(12)) / 100.0
+}
+
 fn main() {
     let a: Vec<String> = std::env::args().collect();
-    let file = a.get(1).cloned().unwrap_or("/tmp/packing20k.bin".into());
+    let file = a
+        .get(1)
+        .cloned()
+        .unwrap_or("/work/bench/channel.bin".into());
     let steps: u64 = a.get(2).and_then(|s| s.parse().ok()).unwrap_or(500);
     let threads: usize = a.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
     let mu: f64 = a.get(4).and_then(|s| s.parse().ok()).unwrap_or(0.5);
-    let raw = std::fs::read(&file).expect("packing file");
+    let raw = std::fs::read(&file).expect("state file");
     let v: Vec<f64> = raw
         .chunks_exact(8)
         .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
         .collect();
-    let n = v[0] as usize;
-    let l = V3::new(v[1], v[2], v[3]);
-    let mut x = Vec::with_capacity(n);
-    let mut d = Vec::with_capacity(n);
-    for i in 0..n {
-        let r = &v[4 + 4 * i..8 + 4 * i];
-        x.push(V3::new(r[0], r[1], r[2]));
-        d.push(r[3]);
-    }
+    let kind = v[0] as usize;
+    let n = v[1] as usize;
+    let l = V3::new(v[2], v[3], v[4]);
+    let dt = v[5];
+    let rec = |i: usize| &v[6 + 10 * i..16 + 10 * i];
+    let x: Vec<V3> = (0..n)
+        .map(|i| V3::new(rec(i)[0], rec(i)[1], rec(i)[2]))
+        .collect();
+    let d: Vec<f64> = (0..n).map(|i| rec(i)[9]).collect();
     let mut p = Particles::new(x, &d, 1.0).unwrap();
-    let mut s: u64 = 12345;
-    for vi in p.v.iter_mut() {
-        for k in 0..3 {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            vi[k] = ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.1;
-        }
+    for i in 0..n {
+        let r = rec(i);
+        p.v[i] = V3::new(r[3], r[4], r[5]);
+        p.omega[i] = V3::new(r[6], r[7], r[8]);
     }
     let law = LawParams::new(1e6, 0.82, mu);
-    let bx = OrthoBox::new(V3::zeros(), l, [true; 3]).unwrap();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
+    println!("kind={kind} threads={threads} mu={mu}");
     pool.install(|| {
-        let t0 = Instant::now();
-        let builds;
-        if mu > 0.0 {
-            let mut e: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> =
-                Engine::new(p, law, bx, NoWalls, NoBody, Some(1.2e-4), 0.2).unwrap();
-            e.run(steps).unwrap();
-            builds = e.nl.builds;
-            println!("{:?} pairs/particle {:.2} contacts/particle {:.2}", e.timers, e.nl.len() as f64 / e.p.len() as f64, e.diag.contacts as f64 / e.p.len() as f64);
+        if kind == 1 {
+            let bx = OrthoBox::new(V3::zeros(), l, [false, true, true]).unwrap();
+            let planes = vec![
+                Plane {
+                    axis: 0,
+                    pos: 0.0,
+                    sign: 1.0,
+                },
+                Plane {
+                    axis: 0,
+                    pos: l.x,
+                    sign: -1.0,
+                },
+            ];
+            let g = Gravity(V3::new(0.0, -1.0, 0.0));
+            if mu > 0.0 {
+                let w = PlaneWalls::<Hooke, Coulomb>::new(planes, law).unwrap();
+                go::<Coulomb, _, _>(p, law, bx, w, g, dt, steps);
+            } else {
+                let w = PlaneWalls::<Hooke, Frictionless>::new(planes, law).unwrap();
+                go::<Frictionless, _, _>(p, law, bx, w, g, dt, steps);
+            }
         } else {
-            let mut e: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> =
-                Engine::new(p, law, bx, NoWalls, NoBody, Some(1.2e-4), 0.2).unwrap();
-            e.run(steps).unwrap();
-            builds = e.nl.builds;
-            println!("{:?} pairs/particle {:.2} contacts/particle {:.2}", e.timers, e.nl.len() as f64 / e.p.len() as f64, e.diag.contacts as f64 / e.p.len() as f64);
+            let bx = OrthoBox::new(V3::zeros(), l, [true; 3]).unwrap();
+            if mu > 0.0 {
+                go::<Coulomb, _, _>(p, law, bx, NoWalls, NoBody, dt, steps);
+            } else {
+                go::<Frictionless, _, _>(p, law, bx, NoWalls, NoBody, dt, steps);
+            }
         }
-        let el = t0.elapsed().as_secs_f64();
-        println!(
-            "N={n} steps={steps} threads={threads} mu={mu}: {:.3e} particle-steps/s ({builds} builds)",
-            n as f64 * steps as f64 / el
-        );
     });
 }

@@ -14,14 +14,12 @@
 use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::neighbor::NeighborList;
+use crate::neighbor::{image_shifts, NeighborList, CHUNK};
 use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Particles per work unit of the gather loop.
-const PART_CHUNK: usize = 1024;
 /// Most planar walls a scene can have (two side walls and a temporary floor).
 pub const MAX_WALLS: usize = 3;
 
@@ -119,8 +117,8 @@ impl<T> SyncPtr<T> {
     }
 }
 
-/// Per-pair result of the force loop: force on i, and q = -(r/(R_i+R_j)) n x F_t so that the
-/// torques are R_i q on i and R_j q on j.
+/// Result of a cross pair: force on i, and q = -(r/(R_i+R_j)) n x F_t so that the torques are
+/// R_i q on i and R_j q on j.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct PairOut {
     pub f: V3,
@@ -201,9 +199,10 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// contact point to the centre), row-major, then the power P_i = sum_j f_ij . v_ij / 2
     /// (+ wall contacts in full; negative when dissipating).
     pub pstats: Vec<[f64; 10]>,
-    pair_power: Vec<f64>,
-    /// Per-pair forces of the last evaluation (list order).
-    pub pair_out: Vec<PairOut>,
+    /// Forces of the cross pairs (see [`crate::neighbor::CHUNK`]) of the last evaluation.
+    pub(crate) cross: Vec<PairOut>,
+    /// Their stress/power records when `want_stats`.
+    cross_stats: Vec<[f64; 10]>,
     /// 1 where the pair was in contact at the last evaluation (list order). Lets the force loop
     /// touch a pair's output and history only when it is or just was in contact; `pair_out` is
     /// zero for every pair not in contact.
@@ -310,8 +309,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             want_stats: false,
             wall_impulse: [V3::zeros(); MAX_WALLS],
             pstats: Vec::new(),
-            pair_power: Vec::new(),
-            pair_out: Vec::new(),
+            cross: Vec::new(),
+            cross_stats: Vec::new(),
             in_contact: Vec::new(),
             energy_ref: None,
             forces_valid: false,
@@ -352,7 +351,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .for_each(|(x, im)| dom.wrap(x, im));
     }
 
+    /// Wrap into the cell and rebuild the pair list (positions are wrapped only here, so
+    /// each pair's periodic image stays fixed between builds).
     pub fn rebuild(&mut self) {
+        self.wrap_all();
         let perm = self.nl.build(&mut self.p, &self.domain);
         if !perm.is_empty() && W::ON {
             let old = std::mem::take(&mut self.wall_hist);
@@ -360,15 +362,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         self.domain.on_rebuild();
         let np = self.nl.len();
-        self.pair_out = vec![PairOut::default(); np];
+        self.cross.clear();
+        self.cross.resize(self.nl.n_cross(), PairOut::default());
         // carried histories belong to open contacts: mark them so they are reset if the
         // contact turns out to be open at the next evaluation
-        self.in_contact = vec![0; np];
+        self.in_contact.clear();
         if T::FRICTIONAL {
             let zero = T::History::default();
-            for (f, h) in self.in_contact.iter_mut().zip(&self.nl.hist) {
-                *f = (*h != zero) as u8;
-            }
+            self.in_contact
+                .extend(self.nl.hist.iter().map(|h| (*h != zero) as u8));
+        } else {
+            self.in_contact.resize(np, 0);
         }
     }
 
@@ -414,14 +418,16 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let t0 = Instant::now();
         self.domain.integrate_initial(&mut self.p, dt);
         self.domain.check(self.step)?;
-        self.wrap_all();
+        // one pass: displacement since the last build, packed records for the pair loop
+        let moved = self.check_and_pack();
         let t1 = Instant::now();
-        if self.nl.needs_rebuild(&self.p, &self.domain) || self.domain.rebuild_due(self.nl.skin) {
+        if moved || !self.nl.valid || self.domain.rebuild_due(self.nl.skin) {
             self.rebuild();
+            self.pack();
         }
         let t2 = Instant::now();
         let wf_old = self.diag.wall_force;
-        self.compute_forces();
+        self.evaluate(dt);
         if W::ON {
             for (w, imp) in self.wall_impulse.iter_mut().enumerate() {
                 *imp += 0.5 * dt * (wf_old[w] + self.diag.wall_force[w]);
@@ -445,6 +451,110 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
         }
         Ok(())
+    }
+
+    /// Pair contacts of the last evaluation in internal indices: (i, j, r_ij, force on i),
+    /// recomputed from the positions, the velocities the evaluation used and the stored
+    /// histories (without advancing them), so no per-pair force needs to be kept between steps.
+    pub fn contact_list(&self) -> Vec<(usize, usize, V3, V3)> {
+        let n = self.p.len();
+        let p = &self.p;
+        let kin_ok = self.kin.len() == n;
+        let vel = |i: usize| -> (V3, V3) {
+            if kin_ok {
+                let k = &self.kin[i];
+                (V3::new(k[0], k[1], k[2]), V3::new(k[4], k[5], k[6]))
+            } else {
+                (p.v[i], p.omega[i])
+            }
+        };
+        let nl = &self.nl;
+        let mut out = Vec::with_capacity(self.diag.contacts);
+        for i in 0..n {
+            for k in nl.own_start[i] as usize..nl.own_start[i + 1] as usize {
+                let j = nl.pair_j[k] as usize;
+                let d = self.domain.delta(&p.x[i], &p.x[j]);
+                let (ri, rj) = (p.radius[i], p.radius[j]);
+                let rs = ri + rj;
+                let r = d.norm();
+                if r >= rs {
+                    continue;
+                }
+                let nrm = d / r;
+                let meff = 1.0 / (p.inv_mass[i] + p.inv_mass[j]);
+                let arm = r / rs;
+                let ((vi, wi), (vj, wj)) = (vel(i), vel(j));
+                let mut vrel = vi - vj - (arm * (ri * wi + rj * wj)).cross(&nrm);
+                if D::STREAMING {
+                    vrel += self.domain.streaming_velocity(&d);
+                }
+                let mut h = nl.hist[k];
+                let pf = self.law.eval(&nrm, rs - r, rs, meff, &vrel, &mut h, 0.0);
+                out.push((i, j, d, pf.f));
+            }
+        }
+        out
+    }
+
+    /// Packed per-step records: (x, R) and the velocities predicted to the end of the step,
+    /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m.
+    fn pack(&mut self) {
+        let n = self.p.len();
+        let hdt = 0.5 * self.dt;
+        let p = &self.p;
+        self.xr.resize(n, [0.0; 4]);
+        self.kin.resize(n, [0.0; 8]);
+        self.xr
+            .par_chunks_mut(CHUNK)
+            .zip(self.kin.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, (a, b))| {
+                for l in 0..a.len() {
+                    let i = c * CHUNK + l;
+                    let x = p.x[i];
+                    a[l] = [x.x, x.y, x.z, p.radius[i]];
+                    let v = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
+                    let w = p.omega[i] + (hdt * p.inv_inertia[i]) * p.torque[i];
+                    b[l] = [v.x, v.y, v.z, p.inv_mass[i], w.x, w.y, w.z, 0.0];
+                }
+            });
+    }
+
+    /// Pack the step records; true if some particle moved more than half the skin since the
+    /// last build (the list must be rebuilt).
+    fn check_and_pack(&mut self) -> bool {
+        let n = self.p.len();
+        if self.nl.x_build.len() != n {
+            return true;
+        }
+        let hdt = 0.5 * self.dt;
+        let lim = 0.25 * self.nl.skin * self.nl.skin;
+        let dom = &self.domain;
+        let xb = &self.nl.x_build;
+        self.xr.resize(n, [0.0; 4]);
+        self.kin.resize(n, [0.0; 8]);
+        let p = &self.p;
+        let (v, om, f, t) = (&p.v, &p.omega, &p.force, &p.torque);
+        let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
+        let x = &p.x;
+        self.xr
+            .par_chunks_mut(CHUNK)
+            .zip(self.kin.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(c, (a, b))| {
+                let mut moved = false;
+                for l in 0..a.len() {
+                    let i = c * CHUNK + l;
+                    let xi = x[i];
+                    moved |= dom.delta(&xi, &xb[i]).norm_squared() > lim;
+                    a[l] = [xi.x, xi.y, xi.z, rad[i]];
+                    let vp = v[i] + (hdt * im[i]) * f[i];
+                    let wp = om[i] + (hdt * ii[i]) * t[i];
+                    b[l] = [vp.x, vp.y, vp.z, im[i], wp.x, wp.y, wp.z, 0.0];
+                }
+                moved
+            })
+            .reduce(|| false, |a, b| a || b)
     }
 
     fn check_overlap(&self) -> Result<()> {
@@ -534,6 +644,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Evaluate all forces and torques for the current positions and velocities, advancing
     /// the tangential histories by one step (the evaluation inside a time step).
     pub fn compute_forces(&mut self) {
+        self.pack();
         self.evaluate(self.dt);
     }
 
@@ -541,126 +652,169 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// evaluation, or after the state was set from outside). As LAMMPS's setup, which skips
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
+        self.pack();
         self.evaluate(0.0);
     }
 
-    /// `hist_dt`: the time over which the histories are advanced (dt in a step, 0 at set-up).
+    /// Forces from the packed records (`pack` or `wrap_and_pack` must have run). `hist_dt`: the
+    /// time over which the histories are advanced (dt in a step, 0 at set-up).
+    ///
+    /// Phase 1, parallel over fixed chunks of particles: each chunk sweeps its particles in
+    /// order; a pair inside the chunk is added to both particles at once (j > i, so j has all
+    /// its in-chunk contributions from earlier particles before its own pairs are added); a
+    /// pair reaching into a later chunk adds to i and writes its force to its cross slot. Walls
+    /// and gravity are added by the owner. Phase 2 adds the cross slots to their second
+    /// particles in list order. Every sum has one order fixed by the list.
     fn evaluate(&mut self, hist_dt: f64) {
         let tstart = Instant::now();
         let dt = hist_dt;
-        let hdt = 0.5 * dt;
         let want_vir = D::NEEDS_VIRIAL || self.want_virial;
         let want_stats = self.want_stats;
+        let n = self.p.len();
+        let ncross = self.nl.n_cross();
+        if self.cross.len() != ncross {
+            self.cross.resize(ncross, PairOut::default());
+        }
         if want_stats {
             self.pstats.clear();
-            self.pstats.resize(self.p.len(), [0.0; 10]);
-            self.pair_power.clear();
-            self.pair_power.resize(self.nl.len(), 0.0);
+            self.pstats.resize(n, [0.0; 10]);
+            self.cross_stats.clear();
+            self.cross_stats.resize(ncross, [0.0; 10]);
         }
         let law = &self.law;
         let dom = &self.domain;
-        let p = &self.p;
+        let g = self.body.g();
+        let planes = self.walls.planes();
+        let wlaw = self.walls.law();
         let nl = &mut self.nl;
-
-        // Phase 1: pair forces. Work units are fixed chunks of particles (the pairs of a
-        // particle are contiguous in the list), so each particle's data is loaded once and the
-        // results do not depend on the number of threads.
-        let n = p.len();
-        // packed per-step copies (see `xr`, `kin`)
-        self.xr.resize(n, [0.0; 4]);
-        self.kin.resize(n, [0.0; 8]);
-        self.xr
-            .par_iter_mut()
-            .zip(self.kin.par_iter_mut())
-            .enumerate()
-            .with_min_len(4096)
-            .for_each(|(i, (a, b))| {
-                let x = p.x[i];
-                *a = [x.x, x.y, x.z, p.radius[i]];
-                let v = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
-                let w = p.omega[i] + (hdt * p.inv_inertia[i]) * p.torque[i];
-                *b = [v.x, v.y, v.z, p.inv_mass[i], w.x, w.y, w.z, 0.0];
-            });
-        let xr = &self.xr;
-        let kin = &self.kin;
         let own_start = &nl.own_start;
         let pair_j = &nl.pair_j;
-        let nchunks = n.div_ceil(PART_CHUNK);
+        let pair_img = &nl.pair_img;
+        let shifts = image_shifts(&dom.h());
+        let xr = &self.xr;
+        let kin = &self.kin;
+        let mass = &self.p.mass;
+        let nchunks = n.div_ceil(CHUNK);
+
+        // split the per-pair and per-chunk arrays into the pieces each chunk owns
+        struct Piece<'a, H, WH> {
+            c: usize,
+            hist: &'a mut [H],
+            flag: &'a mut [u8],
+            cross: &'a mut [PairOut],
+            cstat: &'a mut [[f64; 10]],
+            ps: &'a mut [[f64; 10]],
+            wh: &'a mut [WH],
+        }
         let mut pieces = Vec::with_capacity(nchunks);
         {
             let mut h: &mut [T::History] = &mut nl.hist;
-            let mut o: &mut [PairOut] = &mut self.pair_out;
             let mut fl: &mut [u8] = &mut self.in_contact;
-            let mut pw: &mut [f64] = &mut self.pair_power;
+            let mut cr: &mut [PairOut] = &mut self.cross;
+            let mut cs: &mut [[f64; 10]] = &mut self.cross_stats;
             let mut ps: &mut [[f64; 10]] = &mut self.pstats;
+            let mut wh: &mut [[T::History; MAX_WALLS]] = &mut self.wall_hist;
             for c in 0..nchunks {
-                let lo = own_start[c * PART_CHUNK] as usize;
-                let hi = own_start[((c + 1) * PART_CHUNK).min(n)] as usize;
-                let (a, rest) = std::mem::take(&mut h).split_at_mut(hi - lo);
+                let i0 = c * CHUNK;
+                let i1 = ((c + 1) * CHUNK).min(n);
+                let np = (own_start[i1] - own_start[i0]) as usize;
+                let nx = (nl.cross_off[c + 1] - nl.cross_off[c]) as usize;
+                let (a, rest) = std::mem::take(&mut h).split_at_mut(np);
                 h = rest;
-                let (b, rest) = std::mem::take(&mut o).split_at_mut(hi - lo);
-                o = rest;
-                let (f, rest) = std::mem::take(&mut fl).split_at_mut(hi - lo);
+                let (b, rest) = std::mem::take(&mut fl).split_at_mut(np);
                 fl = rest;
-                let (pwc, psc) = if want_stats {
-                    let (x, rest) = std::mem::take(&mut pw).split_at_mut(hi - lo);
-                    pw = rest;
-                    let np = ((c + 1) * PART_CHUNK).min(n) - c * PART_CHUNK;
-                    let (y, rest) = std::mem::take(&mut ps).split_at_mut(np);
+                let (x, rest) = std::mem::take(&mut cr).split_at_mut(nx);
+                cr = rest;
+                let (cst, pst) = if want_stats {
+                    let (u, rest) = std::mem::take(&mut cs).split_at_mut(nx);
+                    cs = rest;
+                    let (v, rest) = std::mem::take(&mut ps).split_at_mut(i1 - i0);
                     ps = rest;
-                    (x, y)
+                    (u, v)
                 } else {
                     (&mut [][..], &mut [][..])
                 };
-                pieces.push((c, a, b, f, pwc, psc));
+                let w = if W::ON {
+                    let (u, rest) = std::mem::take(&mut wh).split_at_mut(i1 - i0);
+                    wh = rest;
+                    u
+                } else {
+                    &mut [][..]
+                };
+                pieces.push(Piece {
+                    c,
+                    hist: a,
+                    flag: b,
+                    cross: x,
+                    cstat: cst,
+                    ps: pst,
+                    wh: w,
+                });
             }
         }
-        // Each work unit also sums the forces of its particles' own pairs straight into
-        // p.force / p.torque (list order); the gather phase then adds only the reverse pairs.
-        let stats: Vec<(f64, usize, M3, usize)> = pieces
+
+        let results: Vec<ChunkOut> = pieces
             .into_par_iter()
-            .zip(self.p.force.par_chunks_mut(PART_CHUNK))
-            .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
-            .map(|(((c, hist, out, flag, pw, ps), fo), to)| {
-                let mut max_ov = 0.0f64;
-                let mut at = 0usize;
-                let mut vir = M3::zeros();
-                let mut nc = 0usize;
-                let i0 = c * PART_CHUNK;
-                let i1 = ((c + 1) * PART_CHUNK).min(n);
+            .zip(self.p.force.par_chunks_mut(CHUNK))
+            .zip(self.p.torque.par_chunks_mut(CHUNK))
+            .map(|((pc, fo), to)| {
+                let Piece {
+                    c,
+                    hist,
+                    flag,
+                    cross,
+                    cstat,
+                    ps,
+                    wh,
+                } = pc;
+                let mut out = ChunkOut::default();
+                let i0 = c * CHUNK;
+                let i1 = i0 + fo.len();
                 let base = own_start[i0] as usize;
+                let mut xs = 0usize;
+                fo.iter_mut().for_each(|f| *f = V3::zeros());
+                to.iter_mut().for_each(|t| *t = V3::zeros());
                 for i in i0..i1 {
+                    let li = i - i0;
                     let (k0, k1) = (own_start[i] as usize, own_start[i + 1] as usize);
-                    let mut fsum = V3::zeros();
-                    let mut qsum = V3::zeros();
+                    // in-chunk contributions of earlier particles are already in fo/to
+                    let mut fsum = fo[li];
+                    let mut tsum = to[li];
                     let [xi0, xi1, xi2, ri] = xr[i];
                     let xi = V3::new(xi0, xi1, xi2);
+                    let ki = &kin[i];
+                    let vi = V3::new(ki[0], ki[1], ki[2]);
+                    let wi = V3::new(ki[4], ki[5], ki[6]);
+                    let imi = ki[3];
                     for k in k0..k1 {
                         let kk = k - base;
                         // SAFETY: list indices are < n by construction (built from 0..n).
                         let j = unsafe { *pair_j.get_unchecked(k) } as usize;
+                        let is_cross = j >= i1;
                         let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
-                        let d = dom.delta(&xi, &V3::new(xj0, xj1, xj2));
+                        let sh =
+                            unsafe { shifts.get_unchecked(*pair_img.get_unchecked(k) as usize) };
+                        let d = V3::new(xi0 - xj0 - sh.x, xi1 - xj1 - sh.y, xi2 - xj2 - sh.z);
                         let r2 = d.norm_squared();
                         let rs = ri + rj;
                         if r2 >= rs * rs {
-                            if flag[kk] != 0 {
-                                // the contact just opened: drop its history and force
+                            if unsafe { *flag.get_unchecked(kk) } != 0 {
+                                // the contact just opened: drop its history
                                 if T::FRICTIONAL {
                                     hist[kk] = T::History::default();
                                 }
-                                out[kk] = PairOut::default();
                                 flag[kk] = 0;
                             }
+                            // an open cross pair's slot is skipped by its flag in phase 2
+                            xs += is_cross as usize;
                             continue;
                         }
-                        flag[kk] = 1;
-                        nc += 1;
+                        unsafe { *flag.get_unchecked_mut(kk) = 1 };
+                        out.contacts += 1;
                         let r = r2.sqrt();
-                        let ki = &kin[i];
                         let kj = unsafe { kin.get_unchecked(j) };
                         // one division for 1/r, 1/(R_i+R_j) and m_eff = 1/(1/m_i + 1/m_j)
-                        let (imi, imj) = (ki[3], kj[3]);
+                        let imj = kj[3];
                         let ims = imi + imj;
                         let q = 1.0 / (r * rs * ims);
                         let inv_r = rs * ims * q;
@@ -676,190 +830,166 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         // kin holds velocities predicted to the end of the step,
                         // v(n+1/2) + dt/2 a(n): the dashpot sees v(n+1) to O(dt^2) instead of
                         // the half-step velocity (plain velocity Verlet: O(dt) error in e_n).
-                        let vi = V3::new(ki[0], ki[1], ki[2]);
                         let vj = V3::new(kj[0], kj[1], kj[2]);
-                        let wi = V3::new(ki[4], ki[5], ki[6]);
                         let wj = V3::new(kj[4], kj[5], kj[6]);
                         let mut vrel = vi - vj - (arm * (ri * wi + rj * wj)).cross(&nrm);
                         if D::STREAMING {
                             vrel += dom.streaming_velocity(&d);
                         }
-                        let pf = law.eval(&nrm, delta, rs, meff, &vrel, &mut hist[kk], dt);
-                        let q = -arm * nrm.cross(&pf.ft);
-                        out[kk] = PairOut { f: pf.f, q };
+                        let pf = law.eval(
+                            &nrm,
+                            delta,
+                            rs,
+                            meff,
+                            &vrel,
+                            unsafe { hist.get_unchecked_mut(kk) },
+                            dt,
+                        );
+                        let qv = -arm * nrm.cross(&pf.ft);
                         fsum += pf.f;
-                        qsum += q;
+                        tsum += ri * qv;
+                        if is_cross {
+                            cross[xs] = PairOut { f: pf.f, q: qv };
+                        } else {
+                            let lj = j - i0;
+                            fo[lj] -= pf.f;
+                            to[lj] += rj * qv;
+                        }
                         let ov = delta * inv_rs;
-                        if ov > max_ov {
-                            max_ov = ov;
-                            at = k;
+                        if ov > out.max_ov {
+                            out.max_ov = ov;
+                            out.at = (i, j);
                         }
                         if want_vir {
-                            vir += d * pf.f.transpose();
+                            out.vir += d * pf.f.transpose();
                         }
                         if want_stats {
                             let half = 0.5 * d * pf.f.transpose();
-                            let pwr = 0.5 * pf.f.dot(&vrel);
-                            pw[kk] = pwr;
-                            let acc = &mut ps[i - i0];
-                            for (a, b) in acc.iter_mut().zip(half.transpose().iter()) {
-                                *a += b;
+                            let mut rec = [0.0; 10];
+                            for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
+                                *a = *b;
                             }
-                            acc[9] += pwr;
+                            rec[9] = 0.5 * pf.f.dot(&vrel);
+                            add10(&mut ps[li], &rec);
+                            if is_cross {
+                                cstat[xs] = rec;
+                            } else {
+                                add10(&mut ps[j - i0], &rec);
+                            }
+                        }
+                        if is_cross {
+                            xs += 1;
                         }
                     }
-                    fo[i - i0] = fsum;
-                    to[i - i0] = qsum;
+                    if W::ON {
+                        let wl = wlaw.unwrap();
+                        let hs = &mut wh[li];
+                        for (w, pl) in planes.iter().enumerate() {
+                            let gap = pl.sign * (xi[pl.axis] - pl.pos);
+                            if gap >= ri {
+                                // read before write: most particles never touch a wall
+                                if T::FRICTIONAL && hs[w] != T::History::default() {
+                                    hs[w] = T::History::default();
+                                }
+                                continue;
+                            }
+                            let mut nrm = V3::zeros();
+                            nrm[pl.axis] = pl.sign;
+                            let delta = ri - gap;
+                            // contact point on the plane: lever arm = gap; predicted
+                            // end-of-step velocities, as for pairs
+                            let vrel = vi - (gap * wi).cross(&nrm);
+                            let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
+                            fsum += pf.f;
+                            tsum -= gap * nrm.cross(&pf.ft);
+                            out.wall_force[w] -= pf.f;
+                            if want_stats {
+                                // branch vector from the contact point on the wall to the centre
+                                let full = (gap * nrm) * pf.f.transpose();
+                                let acc = &mut ps[li];
+                                for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
+                                    *a += b;
+                                }
+                                acc[9] += pf.f.dot(&vrel);
+                            }
+                            let ov = delta / (2.0 * ri);
+                            if ov > out.max_ov {
+                                out.max_ov = ov;
+                                out.at = (i, usize::MAX);
+                            }
+                        }
+                    }
+                    if G::ON {
+                        fsum += mass[i] * g;
+                    }
+                    fo[li] = fsum;
+                    to[li] = tsum;
                 }
-                (max_ov, at, vir, nc)
+                debug_assert_eq!(xs, cross.len());
+                let _ = &cross;
+                out
             })
             .collect();
 
         let tp = Instant::now();
         let mut diag = StepDiag::default();
-        for (ov, at, vir, nc) in &stats {
-            if *ov > diag.max_overlap {
-                diag.max_overlap = *ov;
-                diag.max_overlap_at = (nl.pair_i[*at] as usize, nl.pair_j[*at] as usize);
+        for o in &results {
+            if o.max_ov > diag.max_overlap {
+                diag.max_overlap = o.max_ov;
+                diag.max_overlap_at = o.at;
             }
-            diag.virial += vir;
-            diag.contacts += nc;
+            diag.virial += o.vir;
+            diag.contacts += o.contacts;
+            for (acc, w) in diag.wall_force.iter_mut().zip(&o.wall_force) {
+                *acc += *w;
+            }
         }
 
-        // Phase 2: gather per particle in list order; walls and gravity.
-        let pair_out = &self.pair_out;
-        let flags = &self.in_contact;
-        let kin = &self.kin;
-        let rev_start = &nl.rev_start;
-        let rev_k = &nl.rev_k;
-        let g = self.body.g();
-        let walls = &self.walls;
-        let planes = walls.planes();
-        let wlaw = walls.law();
-        let x = &self.p.x;
-        let rad = &self.p.radius;
-        let mass = &self.p.mass;
-        let pair_i = &nl.pair_i;
-        let pair_power = &self.pair_power;
-        // Per-particle statistics are written at index i by the work unit that owns i only.
-        let pstats_ptr = SyncPtr(self.pstats.as_mut_ptr());
-        let body = |ci: usize,
-                    fo: &mut [V3],
-                    to: &mut [V3],
-                    mut wh: Option<&mut [[T::History; MAX_WALLS]]>| {
-            let mut wf = [V3::zeros(); MAX_WALLS];
-            let mut wmax = 0.0f64;
-            let mut wat = 0usize;
-            let base = ci * PART_CHUNK;
-            for l in 0..fo.len() {
-                let i = base + l;
-                let mut f = fo[l];
-                let mut q = to[l];
-                for r in rev_start[i]..rev_start[i + 1] {
-                    let k = rev_k[r as usize] as usize;
-                    if flags[k] != 0 {
-                        let o = &pair_out[k];
-                        f -= o.f;
-                        q += o.q;
-                    }
-                }
-                let mut t = rad[i] * q;
-                // SAFETY: pstats has n entries when want_stats; i is owned by this work unit.
-                let mut st = if want_stats {
-                    Some(unsafe { &mut *pstats_ptr.get().add(i) })
-                } else {
-                    None
-                };
-                if let Some(acc) = st.as_deref_mut() {
-                    for r in rev_start[i]..rev_start[i + 1] {
-                        let k = rev_k[r as usize] as usize;
-                        if flags[k] != 0 {
-                            let o = pair_i[k] as usize;
-                            let d = dom.delta(&x[o], &x[i]);
-                            let half = 0.5 * d * pair_out[k].f.transpose();
-                            for (a, b) in acc.iter_mut().zip(half.transpose().iter()) {
-                                *a += b;
-                            }
-                            acc[9] += pair_power[k];
-                        }
-                    }
-                }
-                if W::ON {
-                    let wl = wlaw.unwrap();
-                    let hs = &mut wh.as_mut().unwrap()[l];
-                    let ri = rad[i];
-                    for (w, pl) in planes.iter().enumerate() {
-                        let gap = pl.sign * (x[i][pl.axis] - pl.pos);
-                        if gap >= ri {
-                            if T::FRICTIONAL {
-                                hs[w] = T::History::default();
-                            }
+        // Phase 2: cross pairs onto their second particles, in list order.
+        if ncross > 0 {
+            let cross = &self.cross;
+            let cstat = &self.cross_stats;
+            let cs = &nl.cross_start;
+            let slot = &nl.cross_slot;
+            let cross_k = &nl.cross_k;
+            let flags = &self.in_contact;
+            let rad = &self.p.radius;
+            let pstats_ptr = SyncPtr(self.pstats.as_mut_ptr());
+            self.p
+                .force
+                .par_chunks_mut(CHUNK)
+                .zip(self.p.torque.par_chunks_mut(CHUNK))
+                .enumerate()
+                .for_each(|(c, (fo, to))| {
+                    let i0 = c * CHUNK;
+                    for l in 0..fo.len() {
+                        let i = i0 + l;
+                        let (a, b) = (cs[i] as usize, cs[i + 1] as usize);
+                        if a == b {
                             continue;
                         }
-                        let mut nrm = V3::zeros();
-                        nrm[pl.axis] = pl.sign;
-                        let delta = ri - gap;
-                        // contact point on the plane: lever arm = gap
-                        // predicted end-of-step velocities, as for pairs
-                        let kk = &kin[i];
-                        let vi = V3::new(kk[0], kk[1], kk[2]);
-                        let wi = V3::new(kk[4], kk[5], kk[6]);
-                        let vrel = vi - (gap * wi).cross(&nrm);
-                        let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
-                        f += pf.f;
-                        t -= gap * nrm.cross(&pf.ft);
-                        wf[w] -= pf.f;
-                        if let Some(acc) = st.as_deref_mut() {
-                            // branch vector from the contact point on the wall to the centre
-                            let full = (gap * nrm) * pf.f.transpose();
-                            for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
-                                *a += b;
+                        let mut f = fo[l];
+                        let mut t = to[l];
+                        for &s in &slot[a..b] {
+                            if flags[cross_k[s as usize] as usize] != 0 {
+                                let o = &cross[s as usize];
+                                f -= o.f;
+                                t += rad[i] * o.q;
                             }
-                            acc[9] += pf.f.dot(&vrel);
                         }
-                        let ov = delta / (2.0 * ri);
-                        if ov > wmax {
-                            wmax = ov;
-                            wat = i;
+                        fo[l] = f;
+                        to[l] = t;
+                        if want_stats {
+                            // SAFETY: pstats has n entries when want_stats; i is owned here.
+                            let acc = unsafe { &mut *pstats_ptr.get().add(i) };
+                            for &s in &slot[a..b] {
+                                if flags[cross_k[s as usize] as usize] != 0 {
+                                    add10(acc, &cstat[s as usize]);
+                                }
+                            }
                         }
                     }
-                }
-                if G::ON {
-                    f += mass[i] * g;
-                }
-                fo[l] = f;
-                to[l] = t;
-            }
-            (wf, wmax, wat)
-        };
-        let wstats: Vec<([V3; MAX_WALLS], f64, usize)> = if W::ON {
-            self.p
-                .force
-                .par_chunks_mut(PART_CHUNK)
-                .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
-                .zip(self.wall_hist.par_chunks_mut(PART_CHUNK))
-                .enumerate()
-                .map(|(ci, ((fo, to), wh))| body(ci, fo, to, Some(wh)))
-                .collect()
-        } else {
-            self.p
-                .force
-                .par_chunks_mut(PART_CHUNK)
-                .zip(self.p.torque.par_chunks_mut(PART_CHUNK))
-                .enumerate()
-                .map(|(ci, (fo, to))| body(ci, fo, to, None))
-                .collect()
-        };
-        if W::ON {
-            for (wf, wmax, wat) in &wstats {
-                for (acc, w) in diag.wall_force.iter_mut().zip(wf) {
-                    *acc += *w;
-                }
-                if *wmax > diag.max_overlap {
-                    diag.max_overlap = *wmax;
-                    diag.max_overlap_at = (*wat, usize::MAX);
-                }
-            }
+                });
         }
         self.diag = diag;
         self.forces_valid = true;
@@ -867,5 +997,22 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let te = Instant::now();
         self.timers.pair_phase += (tp - tstart).as_secs_f64();
         self.timers.gather_phase += (te - tp).as_secs_f64();
+    }
+}
+
+/// What one chunk of the force loop reports.
+#[derive(Default)]
+struct ChunkOut {
+    max_ov: f64,
+    at: (usize, usize),
+    vir: M3,
+    contacts: usize,
+    wall_force: [V3; MAX_WALLS],
+}
+
+#[inline(always)]
+fn add10(acc: &mut [f64; 10], rec: &[f64; 10]) {
+    for (a, b) in acc.iter_mut().zip(rec) {
+        *a += b;
     }
 }

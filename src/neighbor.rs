@@ -12,26 +12,41 @@
 use crate::contact::Friction;
 use crate::domain::Domain;
 use crate::particles::Particles;
-use crate::V3;
+use crate::{M3, V3};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Particles per work unit when building; fixed so that results do not depend on thread count.
 const BUILD_CHUNK: usize = 512;
+/// Particles per work unit of the force loop. Fixed (never derived from the thread count): a
+/// pair whose two particles lie in the same chunk is summed in place by that chunk, a pair that
+/// crosses into a later chunk goes through a buffer (`cross_*`), and both orders depend only on
+/// the list, so any number of threads gives the same bits.
+pub const CHUNK: usize = 512;
 
 #[derive(Clone, Debug)]
 pub struct NeighborList<T: Friction> {
     pub skin: f64,
-    /// First particle of each pair (pairs of particle i are contiguous, i ascending).
-    pub pair_i: Vec<u32>,
+    /// Second particle of each pair; pairs of particle i are own_start[i]..own_start[i+1]
+    /// (i ascending, j > i).
     pub pair_j: Vec<u32>,
+    /// Periodic image of each pair, fixed between builds (positions are wrapped only at a
+    /// build): r_ij = x_i - x_j - H n with n in {-1,0,1}^3 coded as 9(n0+1) + 3(n1+1) + n2+1
+    /// (see [`image_shifts`]). Replaces a minimum-image computation per pair and step.
+    pub pair_img: Vec<u8>,
     /// Tangential history per pair, in list order (zero-sized without friction).
     pub hist: Vec<T::History>,
     /// own_start[i]..own_start[i+1]: pairs whose first particle is i.
     pub own_start: Vec<u32>,
-    /// rev_start[j]..rev_start[j+1] index into rev_k: pairs whose second particle is j.
-    pub rev_start: Vec<u32>,
-    pub rev_k: Vec<u32>,
+    /// Cross pairs (second particle in a later chunk) are numbered in list order; chunk c owns
+    /// slots cross_off[c]..cross_off[c+1].
+    pub cross_off: Vec<u32>,
+    /// cross_start[j]..cross_start[j+1] index into cross_slot: the cross pairs whose second
+    /// particle is j, in list order.
+    pub cross_start: Vec<u32>,
+    pub cross_slot: Vec<u32>,
+    /// Pair index of each cross slot (its contact flag tells phase 2 whether the slot is set).
+    pub cross_k: Vec<u32>,
     /// Positions at the last build (for the half-skin criterion).
     pub x_build: Vec<V3>,
     pub builds: u64,
@@ -42,12 +57,14 @@ impl<T: Friction> NeighborList<T> {
     pub fn new(skin: f64) -> Self {
         NeighborList {
             skin,
-            pair_i: vec![],
             pair_j: vec![],
+            pair_img: vec![],
             hist: vec![],
             own_start: vec![],
-            rev_start: vec![],
-            rev_k: vec![],
+            cross_off: vec![],
+            cross_start: vec![],
+            cross_slot: vec![],
+            cross_k: vec![],
             x_build: vec![],
             builds: 0,
             valid: false,
@@ -55,10 +72,24 @@ impl<T: Friction> NeighborList<T> {
     }
 
     pub fn len(&self) -> usize {
-        self.pair_i.len()
+        self.pair_j.len()
     }
     pub fn is_empty(&self) -> bool {
-        self.pair_i.is_empty()
+        self.pair_j.is_empty()
+    }
+    /// Number of cross pairs (buffered between chunks).
+    pub fn n_cross(&self) -> usize {
+        self.cross_slot.len()
+    }
+
+    /// First particle of every pair (list order), recovered from the CSR offsets.
+    pub fn pair_i(&self) -> Vec<u32> {
+        let mut out = Vec::with_capacity(self.len());
+        for i in 0..self.own_start.len().saturating_sub(1) {
+            let c = (self.own_start[i + 1] - self.own_start[i]) as usize;
+            out.extend(std::iter::repeat_n(i as u32, c));
+        }
+        out
     }
 
     /// True if some particle moved more than half the skin since the last build.
@@ -82,11 +113,11 @@ impl<T: Friction> NeighborList<T> {
         let mut carried: HashMap<u64, (T::History, bool)> = HashMap::new();
         if frictional && self.valid {
             let zero = T::History::default();
-            for k in 0..self.pair_i.len() {
-                let h = self.hist[k];
+            let pair_i = self.pair_i();
+            for ((&i, &j), &h) in pair_i.iter().zip(&self.pair_j).zip(&self.hist) {
                 if h != zero {
-                    let a = p.id[self.pair_i[k] as usize];
-                    let b = p.id[self.pair_j[k] as usize];
+                    let a = p.id[i as usize];
+                    let b = p.id[j as usize];
                     let (key, flipped) = pair_key(a, b);
                     carried.insert(key, (h, flipped));
                 }
@@ -165,6 +196,7 @@ impl<T: Friction> NeighborList<T> {
         let x = &p.x;
         let rad = &p.radius;
         let start_ref = &start;
+        let hinv = dom.h().try_inverse().unwrap_or_else(M3::zeros);
         let chunks: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(BUILD_CHUNK))
             .into_par_iter()
             .map(|ch| {
@@ -210,46 +242,28 @@ impl<T: Friction> NeighborList<T> {
 
         // 5. CSR (exact capacities: no growth slack in the largest arrays)
         let np_total: usize = chunks.iter().map(|c| c.1.len()).sum();
-        self.pair_i = Vec::with_capacity(np_total);
         self.pair_j = Vec::with_capacity(np_total);
         self.own_start.clear();
         self.own_start.reserve(n + 1);
         self.own_start.push(0);
-        self.pair_i.clear();
-        self.pair_j.clear();
-        let mut i = 0u32;
         for (counts, js) in &chunks {
             for &c in counts {
                 let s = *self.own_start.last().unwrap();
                 self.own_start.push(s + c);
-                self.pair_i.extend(std::iter::repeat_n(i, c as usize));
-                i += 1;
             }
             self.pair_j.extend_from_slice(js);
         }
-        let np = self.pair_i.len();
-        // reverse index: pairs by second particle, in ascending pair order
-        self.rev_start.clear();
-        self.rev_start.resize(n + 1, 0);
-        for &j in &self.pair_j {
-            self.rev_start[j as usize + 1] += 1;
-        }
-        for j in 0..n {
-            self.rev_start[j + 1] += self.rev_start[j];
-        }
-        self.rev_k = vec![0; np];
-        let mut fillr = self.rev_start.clone();
-        for (k, &j) in self.pair_j.iter().enumerate() {
-            self.rev_k[fillr[j as usize] as usize] = k as u32;
-            fillr[j as usize] += 1;
-        }
+        self.build_cross(n);
+        self.set_images(&p.x, dom, &hinv);
+        let np = self.pair_j.len();
 
         // 6. histories
         self.hist = vec![T::History::default(); np];
         if frictional && !carried.is_empty() {
-            for k in 0..np {
-                let a = p.id[self.pair_i[k] as usize];
-                let b = p.id[self.pair_j[k] as usize];
+            let pair_i = self.pair_i();
+            for (k, (&i, &j)) in pair_i.iter().zip(&self.pair_j).enumerate() {
+                let a = p.id[i as usize];
+                let b = p.id[j as usize];
                 let (key, flipped) = pair_key(a, b);
                 if let Some(&(h, was_flipped)) = carried.get(&key) {
                     self.hist[k] = if flipped == was_flipped {
@@ -270,6 +284,74 @@ impl<T: Friction> NeighborList<T> {
             perm
         }
     }
+}
+
+impl<T: Friction> NeighborList<T> {
+    /// Image code of every pair from the positions at the build (`x_build` on a restart).
+    pub fn set_images<D: Domain>(&mut self, x: &[V3], dom: &D, hinv: &M3) {
+        let n = x.len();
+        let mut img = vec![0u8; self.pair_j.len()];
+        for i in 0..n {
+            for k in self.own_start[i] as usize..self.own_start[i + 1] as usize {
+                let j = self.pair_j[k] as usize;
+                let shift = (x[i] - x[j]) - dom.delta(&x[i], &x[j]);
+                let s = hinv * shift;
+                let c = |a: f64| (a.round().clamp(-1.0, 1.0) + 1.0) as u8;
+                img[k] = 9 * c(s[0]) + 3 * c(s[1]) + c(s[2]);
+            }
+        }
+        self.pair_img = img;
+    }
+
+    /// Number the cross pairs and index them by second particle (from pair_j and own_start).
+    pub fn build_cross(&mut self, n: usize) {
+        let nchunks = n.div_ceil(CHUNK);
+        self.cross_off.clear();
+        self.cross_off.reserve(nchunks + 1);
+        self.cross_start.clear();
+        self.cross_start.resize(n + 1, 0);
+        let mut partner: Vec<u32> = Vec::new();
+        self.cross_k.clear();
+        for c in 0..nchunks {
+            self.cross_off.push(partner.len() as u32);
+            let end = ((c + 1) * CHUNK).min(n) as u32;
+            let (lo, hi) = (
+                self.own_start[c * CHUNK] as usize,
+                self.own_start[((c + 1) * CHUNK).min(n)] as usize,
+            );
+            for (k, &j) in self.pair_j[lo..hi].iter().enumerate() {
+                if j >= end {
+                    partner.push(j);
+                    self.cross_k.push((lo + k) as u32);
+                    self.cross_start[j as usize + 1] += 1;
+                }
+            }
+        }
+        self.cross_off.push(partner.len() as u32);
+        for j in 0..n {
+            self.cross_start[j + 1] += self.cross_start[j];
+        }
+        self.cross_slot = vec![0; partner.len()];
+        let mut fill = self.cross_start.clone();
+        for (s, &j) in partner.iter().enumerate() {
+            self.cross_slot[fill[j as usize] as usize] = s as u32;
+            fill[j as usize] += 1;
+        }
+    }
+}
+
+/// The 27 lattice shifts H n indexed by image code (see `pair_img`).
+pub fn image_shifts(h: &M3) -> [V3; 27] {
+    let mut t = [V3::zeros(); 27];
+    for (c, v) in t.iter_mut().enumerate() {
+        let n = V3::new(
+            (c / 9) as f64 - 1.0,
+            ((c / 3) % 3) as f64 - 1.0,
+            (c % 3) as f64 - 1.0,
+        );
+        *v = h * n;
+    }
+    t
 }
 
 /// Key of an unordered pair of ids, and whether (a, b) is the reverse of the key's order.

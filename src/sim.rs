@@ -51,6 +51,9 @@ pub trait Simulation: Send + Sync {
     fn volume(&self) -> f64;
     /// Cell matrix (columns = cell vectors) and origin.
     fn cell(&self) -> (crate::M3, crate::V3);
+    /// A position mapped into the primary cell (the kernel wraps only at list builds, so
+    /// stored positions may lie up to half a skin outside).
+    fn wrapped(&self, x: crate::V3) -> crate::V3;
     /// Write the complete dynamic state (see `checkpoint`).
     fn save_checkpoint(&self, w: &mut crate::checkpoint::Writer);
     /// Restore a state written by `save_checkpoint` from a simulation built with the same
@@ -108,16 +111,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             ("particles".to_string(), particle_bytes(&self.p)),
             (
                 "pair list".to_string(),
-                vec_bytes(&nl.pair_i)
-                    + vec_bytes(&nl.pair_j)
+                vec_bytes(&nl.pair_j)
                     + vec_bytes(&nl.own_start)
-                    + vec_bytes(&nl.rev_start)
-                    + vec_bytes(&nl.rev_k)
-                    + vec_bytes(&nl.x_build),
+                    + vec_bytes(&nl.cross_off)
+                    + vec_bytes(&nl.cross_start)
+                    + vec_bytes(&nl.cross_slot)
+                    + vec_bytes(&nl.cross_k)
+                    + vec_bytes(&nl.pair_img)
+                    + vec_bytes(&nl.x_build)
+                    + vec_bytes(&self.in_contact),
             ),
             (
-                "pair forces".to_string(),
-                vec_bytes(&self.pair_out) + vec_bytes(&self.in_contact),
+                "cross-chunk pair forces".to_string(),
+                vec_bytes(&self.cross),
             ),
             (
                 "packed step records".to_string(),
@@ -131,9 +137,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     pub fn elastic_energy_sum(&self) -> f64 {
         let kn = self.law.params.kn;
         let mut u = 0.0;
-        for k in 0..self.nl.len() {
-            let i = self.nl.pair_i[k] as usize;
-            let j = self.nl.pair_j[k] as usize;
+        let pair_i = self.nl.pair_i();
+        for (&i, &j) in pair_i.iter().zip(&self.nl.pair_j) {
+            let (i, j) = (i as usize, j as usize);
             let rs = self.p.radius[i] + self.p.radius[j];
             let r = self.domain.delta(&self.p.x[i], &self.p.x[j]).norm();
             let delta = rs - r;
@@ -199,6 +205,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     fn cell(&self) -> (crate::M3, crate::V3) {
         (self.domain.h(), self.domain.origin())
     }
+    fn wrapped(&self, x: crate::V3) -> crate::V3 {
+        let mut y = x;
+        let mut im = [0i32; 3];
+        self.domain.wrap(&mut y, &mut im);
+        y
+    }
     fn elastic_energy(&self) -> f64 {
         self.elastic_energy_sum()
     }
@@ -212,17 +224,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
         self.domain.observables()
     }
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)> {
-        let nl = &self.nl;
-        let mut out = Vec::with_capacity(self.diag.contacts);
-        for k in 0..nl.len() {
-            if self.in_contact[k] != 0 {
-                let i = nl.pair_i[k] as usize;
-                let j = nl.pair_j[k] as usize;
-                let d = self.domain.delta(&self.p.x[i], &self.p.x[j]);
-                out.push((self.p.id[i], self.p.id[j], d, self.pair_out[k].f));
-            }
-        }
-        out
+        self.contact_list()
+            .into_iter()
+            .map(|(i, j, d, f)| (self.p.id[i], self.p.id[j], d, f))
+            .collect()
     }
     fn particle_stats(&self) -> &[[f64; 10]] {
         &self.pstats
@@ -260,11 +265,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         );
         w.u32s("p.id", &p.id);
         let nl = &self.nl;
-        w.u32s("nl.pair_i", &nl.pair_i);
         w.u32s("nl.pair_j", &nl.pair_j);
         w.u32s("nl.own_start", &nl.own_start);
-        w.u32s("nl.rev_start", &nl.rev_start);
-        w.u32s("nl.rev_k", &nl.rev_k);
         w.f64s("nl.x_build", &flat_v3(&nl.x_build));
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
         if T::FRICTIONAL {
@@ -277,12 +279,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 .collect();
             w.f64s("walls.hist", &wh);
         }
-        let po: Vec<f64> = self
-            .pair_out
-            .iter()
-            .flat_map(|o| [o.f.x, o.f.y, o.f.z, o.q.x, o.q.y, o.q.z])
-            .collect();
-        w.f64s("pair_out", &po);
         let flags: Vec<u32> = self.in_contact.iter().map(|&f| f as u32).collect();
         w.u32s("in_contact", &flags);
         w.f64s("domain", &self.domain.save_state());
@@ -359,16 +355,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .map(|c| [c[0], c[1], c[2]])
             .collect();
         let nl = &mut self.nl;
-        nl.pair_i = r.u32s("nl.pair_i")?;
         nl.pair_j = r.u32s("nl.pair_j")?;
         nl.own_start = r.u32s("nl.own_start")?;
-        nl.rev_start = r.u32s("nl.rev_start")?;
-        nl.rev_k = r.u32s("nl.rev_k")?;
+        if nl.own_start.len() != n + 1 {
+            return Err(bad(
+                "pair list offsets do not match the particle count".into()
+            ));
+        }
+        nl.build_cross(n);
         nl.x_build = unflat_v3(&r.f64s("nl.x_build")?);
         let meta = r.u64s("nl.meta")?;
         nl.builds = meta[0];
         nl.valid = meta[1] != 0;
-        let np = nl.pair_i.len();
+        let np = nl.pair_j.len();
         nl.hist = vec![T::History::default(); np];
         if T::FRICTIONAL {
             let h = r.f64s("nl.hist")?;
@@ -386,16 +385,18 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 }
             }
         }
-        let po = r.f64s("pair_out")?;
-        self.pair_out = po
-            .chunks_exact(6)
-            .map(|c| crate::engine::PairOut {
-                f: crate::V3::new(c[0], c[1], c[2]),
-                q: crate::V3::new(c[3], c[4], c[5]),
-            })
-            .collect();
+        self.cross = vec![crate::engine::PairOut::default(); self.nl.n_cross()];
         self.in_contact = r.u32s("in_contact")?.iter().map(|&f| f as u8).collect();
         self.domain.load_state(&r.f64s("domain")?)?;
+        // the pairs' periodic images follow from the positions at the last build
+        let hinv = self
+            .domain
+            .h()
+            .try_inverse()
+            .unwrap_or_else(crate::M3::zeros);
+        let xb = std::mem::take(&mut self.nl.x_build);
+        self.nl.set_images(&xb, &self.domain, &hinv);
+        self.nl.x_build = xb;
         for (k, c) in r.f64s("walls.impulse")?.chunks_exact(3).enumerate() {
             self.wall_impulse[k] = crate::V3::new(c[0], c[1], c[2]);
         }

@@ -186,8 +186,9 @@ fn elastic_energy<D: crate::domain::Domain>(
     e: &Engine<Hooke, Frictionless, D, NoWalls, NoBody>,
 ) -> f64 {
     let mut u = 0.0;
+    let pair_i = e.nl.pair_i();
     for k in 0..e.nl.len() {
-        let i = e.nl.pair_i[k] as usize;
+        let i = pair_i[k] as usize;
         let j = e.nl.pair_j[k] as usize;
         let d = crate::domain::Domain::delta(&e.domain, &e.p.x[i], &e.p.x[j]).norm();
         let delta = e.p.radius[i] + e.p.radius[j] - d;

@@ -178,7 +178,7 @@ impl Sim {
     }
     fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         let p = self.inner.particles();
-        self.by_id(py, |i| p.x[i])
+        self.by_id(py, |i| self.inner.wrapped(p.x[i]))
     }
     /// Unwrapped positions (periodic images added back).
     fn unwrapped_positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
