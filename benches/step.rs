@@ -21,7 +21,7 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     steps: u64,
 ) {
     let mut e: Engine<Hooke, T, OrthoBox, W, G> =
-        Engine::new(p, law, bx, walls, body, Some(dt), 0.2).unwrap();
+        Engine::new(p, law, bx, walls, body, Some(dt), skin()).unwrap();
     e.run(10).unwrap();
     e.timers = Default::default();
     let b0 = e.nl.builds;
@@ -40,6 +40,9 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
         e.nl.builds - b0,
         e.memory_list().iter().map(|(_, b)| *b as f64).sum::<f64>() / n as f64
     );
+    for (name, b) in e.memory_list() {
+        println!("  {name}: {:.1} B/particle", b as f64 / n as f64);
+    }
     println!(
         "N={n} steps={steps} {}: {:.3e} particle-steps/s wall, {:.3e} per CPU-second",
         <Hooke as Form>::NAME,
@@ -56,6 +59,13 @@ fn cpu_seconds() -> f64 {
     let f: Vec<&str> = after.split_whitespace().collect();
     let t = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
     (t(11) + t(12)) / 100.0
+}
+
+fn skin() -> f64 {
+    std::env::var("SKIN")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.2)
 }
 
 fn main() {

@@ -666,10 +666,21 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// and gravity are added by the owner. Phase 2 adds the cross slots to their second
     /// particles in list order. Every sum has one order fixed by the list.
     fn evaluate(&mut self, hist_dt: f64) {
+        // the statistics and virial paths are compiled separately, so the plain step carries
+        // none of their code (nor its register pressure)
+        match (self.want_stats, D::NEEDS_VIRIAL || self.want_virial) {
+            (false, false) => self.evaluate_with::<false, false>(hist_dt),
+            (false, true) => self.evaluate_with::<false, true>(hist_dt),
+            (true, false) => self.evaluate_with::<true, false>(hist_dt),
+            (true, true) => self.evaluate_with::<true, true>(hist_dt),
+        }
+    }
+
+    fn evaluate_with<const STATS: bool, const VIR: bool>(&mut self, hist_dt: f64) {
         let tstart = Instant::now();
         let dt = hist_dt;
-        let want_vir = D::NEEDS_VIRIAL || self.want_virial;
-        let want_stats = self.want_stats;
+        let want_vir = VIR;
+        let want_stats = STATS;
         let n = self.p.len();
         let ncross = self.nl.n_cross();
         if self.cross.len() != ncross {
