@@ -14,7 +14,8 @@
 use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::neighbor::{image_shifts, NeighborList, CHUNK};
+use crate::history::{Cursor, HistList};
+use crate::neighbor::{image_shifts, widen, NeighborList, CHUNK};
 use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
@@ -106,17 +107,6 @@ impl Body for Gravity {
     }
 }
 
-/// A raw pointer that work units share; each writes only the entries it owns.
-#[derive(Clone, Copy)]
-struct SyncPtr<T>(*mut T);
-unsafe impl<T> Sync for SyncPtr<T> {}
-unsafe impl<T> Send for SyncPtr<T> {}
-impl<T> SyncPtr<T> {
-    fn get(self) -> *mut T {
-        self.0
-    }
-}
-
 /// Result of a cross pair: force on i, and q = -(r/(R_i+R_j)) n x F_t so that the torques are
 /// R_i q on i and R_j q on j.
 #[derive(Clone, Copy, Debug, Default)]
@@ -172,9 +162,14 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub domain: D,
     pub walls: W,
     pub body: G,
-    pub nl: NeighborList<T>,
-    /// Per-particle wall histories (empty without walls; zero-sized without friction).
-    pub wall_hist: Vec<[T::History; MAX_WALLS]>,
+    pub nl: NeighborList,
+    /// Tangential histories of the closed pair contacts, one sorted list per force-loop chunk
+    /// (`crate::history`), and the lists the next evaluation writes.
+    pub hist: Vec<HistList<T::History>>,
+    hist_next: Vec<HistList<T::History>>,
+    /// The same for wall contacts (key: particle within the chunk x MAX_WALLS + wall).
+    pub whist: Vec<HistList<T::History>>,
+    whist_next: Vec<HistList<T::History>>,
     pub dt: f64,
     pub step: u64,
     pub time: f64,
@@ -199,14 +194,13 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// contact point to the centre), row-major, then the power P_i = sum_j f_ij . v_ij / 2
     /// (+ wall contacts in full; negative when dissipating).
     pub pstats: Vec<[f64; 10]>,
-    /// Forces of the cross pairs (see [`crate::neighbor::CHUNK`]) of the last evaluation.
-    pub(crate) cross: Vec<PairOut>,
+    /// Forces of the cross pairs in contact (see [`crate::neighbor::CHUNK`]) at the last
+    /// evaluation, compact per chunk; `cross_idx[slot]` is the entry of a cross slot in its
+    /// chunk's list, or u32::MAX when the pair is open.
+    pub(crate) cross: Vec<Vec<PairOut>>,
+    pub(crate) cross_idx: Vec<u32>,
     /// Their stress/power records when `want_stats`.
-    cross_stats: Vec<[f64; 10]>,
-    /// 1 where the pair was in contact at the last evaluation (list order). Lets the force loop
-    /// touch a pair's output and history only when it is or just was in contact; `pair_out` is
-    /// zero for every pair not in contact.
-    pub in_contact: Vec<u8>,
+    cross_stats: Vec<Vec<[f64; 10]>>,
     /// Total energy at the first guard check (closed systems only).
     energy_ref: Option<f64>,
     forces_valid: bool,
@@ -283,12 +277,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 ));
             }
         }
-        let n = p.len();
-        let wall_hist = if W::ON {
-            vec![[T::History::default(); MAX_WALLS]; n]
-        } else {
-            Vec::new()
-        };
         let mut e = Engine {
             p,
             law,
@@ -296,7 +284,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             walls,
             body,
             nl: NeighborList::new(skin),
-            wall_hist,
+            hist: Vec::new(),
+            hist_next: Vec::new(),
+            whist: Vec::new(),
+            whist_next: Vec::new(),
             dt,
             step: 0,
             time: 0.0,
@@ -310,8 +301,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             wall_impulse: [V3::zeros(); MAX_WALLS],
             pstats: Vec::new(),
             cross: Vec::new(),
+            cross_idx: Vec::new(),
             cross_stats: Vec::new(),
-            in_contact: Vec::new(),
             energy_ref: None,
             forces_valid: false,
         };
@@ -352,28 +343,152 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     }
 
     /// Wrap into the cell and rebuild the pair list (positions are wrapped only here, so
-    /// each pair's periodic image stays fixed between builds).
+    /// each pair's periodic image stays fixed between builds); the contact histories follow
+    /// their particles' ids into the new list.
     pub fn rebuild(&mut self) {
         self.wrap_all();
-        let perm = self.nl.build(&mut self.p, &self.domain);
-        if !perm.is_empty() && W::ON {
-            let old = std::mem::take(&mut self.wall_hist);
-            self.wall_hist = perm.iter().map(|&k| old[k]).collect();
-        }
+        let (pairs, walls) = self.carried_histories();
+        let _perm = self.nl.build(&mut self.p, &self.domain);
         self.domain.on_rebuild();
-        let np = self.nl.len();
-        self.cross.clear();
-        self.cross.resize(self.nl.n_cross(), PairOut::default());
-        // carried histories belong to open contacts: mark them so they are reset if the
-        // contact turns out to be open at the next evaluation
-        self.in_contact.clear();
-        if T::FRICTIONAL {
-            let zero = T::History::default();
-            self.in_contact
-                .extend(self.nl.hist.iter().map(|h| (*h != zero) as u8));
-        } else {
-            self.in_contact.resize(np, 0);
+        self.set_histories(&pairs, &walls);
+        let n = self.p.len();
+        let nchunks = n.div_ceil(CHUNK);
+        self.cross.resize_with(nchunks, Vec::new);
+        self.cross_stats.resize_with(nchunks, Vec::new);
+        self.cross_idx.clear();
+        self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
+        self.trim();
+    }
+
+    /// Keep the per-contact buffers at about 1.25 times what they hold: pushes during a sweep
+    /// double a buffer that overflows, and a build is a good moment to give the excess back.
+    fn trim(&mut self) {
+        fn fit<X>(v: &mut Vec<X>, want: usize) {
+            let want = if want == 0 { 0 } else { want + want / 4 + 16 };
+            if v.capacity() > want {
+                v.shrink_to(want);
+            } else {
+                v.reserve_exact(want - v.len());
+            }
         }
+        // nothing is kept for parts a scene does not have (no friction: no histories; no
+        // walls: no wall histories)
+        let np = if T::FRICTIONAL { self.hist.len() } else { 0 };
+        let nw = if T::FRICTIONAL && W::ON {
+            self.whist.len()
+        } else {
+            0
+        };
+        let lists = self.hist.iter_mut().zip(self.hist_next.iter_mut()).take(np);
+        let wlists = self
+            .whist
+            .iter_mut()
+            .zip(self.whist_next.iter_mut())
+            .take(nw);
+        for (a, b) in lists.chain(wlists) {
+            let want = a.len();
+            for l in [a, b] {
+                fit(&mut l.keys, want);
+                fit(&mut l.vals, want);
+            }
+        }
+        for c in self.cross.iter_mut() {
+            let want = c.len();
+            fit(c, want);
+        }
+    }
+
+    /// Every stored history with the ids of its particles: pairs (id_i, id_j, h) oriented as
+    /// listed, walls (id, wall, h).
+    #[allow(clippy::type_complexity)]
+    pub fn carried_histories(&self) -> (Vec<(u32, u32, T::History)>, Vec<(u32, u8, T::History)>) {
+        let mut pairs = Vec::new();
+        let mut walls = Vec::new();
+        if !T::FRICTIONAL || !self.nl.valid {
+            return (pairs, walls);
+        }
+        let nl = &self.nl;
+        let n = self.p.len();
+        for (c, list) in self.hist.iter().enumerate() {
+            let i0 = c * CHUNK;
+            if i0 >= n {
+                break;
+            }
+            let base = nl.own_start[i0] as usize;
+            let mut i = i0;
+            for (&kk, &h) in list.keys.iter().zip(&list.vals) {
+                let k = base + kk as usize;
+                while nl.own_start[i + 1] as usize <= k {
+                    i += 1;
+                }
+                pairs.push((self.p.id[i], self.p.id[nl.pair_j[k] as usize], h));
+            }
+        }
+        for (c, list) in self.whist.iter().enumerate() {
+            for (&key, &h) in list.keys.iter().zip(&list.vals) {
+                let i = c * CHUNK + key as usize / MAX_WALLS;
+                if i < n {
+                    walls.push((self.p.id[i], (key as usize % MAX_WALLS) as u8, h));
+                }
+            }
+        }
+        (pairs, walls)
+    }
+
+    /// Place histories given by particle ids into the current pair list and particle order
+    /// (after a build or a restart). A pair no longer listed loses its history.
+    pub fn set_histories(
+        &mut self,
+        pairs: &[(u32, u32, T::History)],
+        walls: &[(u32, u8, T::History)],
+    ) {
+        let n = self.p.len();
+        let nchunks = n.div_ceil(CHUNK);
+        let nl = &self.nl;
+        let mut inv = vec![0usize; n];
+        for (i, &id) in self.p.id.iter().enumerate() {
+            inv[id as usize] = i;
+        }
+        let mut pe: Vec<(u64, T::History)> = Vec::with_capacity(pairs.len());
+        for &(a, b, h) in pairs {
+            let (ia, ib) = (inv[a as usize], inv[b as usize]);
+            let (lo, hi, h) = if ia < ib {
+                (ia, ib, h)
+            } else {
+                (ib, ia, T::flip(h))
+            };
+            if let Some(k) = nl.find(lo, hi) {
+                pe.push((k as u64, h));
+            }
+        }
+        pe.sort_unstable_by_key(|e| e.0);
+        self.hist = crate::history::distribute(&pe, &nl.chunk_bases());
+        let mut we: Vec<(u64, T::History)> = walls
+            .iter()
+            .map(|&(id, w, h)| ((inv[id as usize] * MAX_WALLS + w as usize) as u64, h))
+            .collect();
+        we.sort_unstable_by_key(|e| e.0);
+        let wb: Vec<u64> = (0..=nchunks)
+            .map(|c| ((c * CHUNK).min(n) * MAX_WALLS) as u64)
+            .collect();
+        self.whist = crate::history::distribute(&we, &wb);
+        self.hist_next.resize_with(nchunks, HistList::default);
+        self.whist_next.resize_with(nchunks, HistList::default);
+    }
+
+    pub(crate) fn hist_next_ref(&self) -> &[HistList<T::History>] {
+        &self.hist_next
+    }
+    pub(crate) fn whist_next_ref(&self) -> &[HistList<T::History>] {
+        &self.whist_next
+    }
+
+    /// Every stored pair history (for tests and diagnostics).
+    pub fn pair_histories(&self) -> Vec<T::History> {
+        self.hist
+            .iter()
+            .flat_map(|l| l.vals.iter().copied())
+            .collect()
     }
 
     /// Forces in `p` correspond to the state (after loading a checkpoint).
@@ -470,6 +585,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         };
         let nl = &self.nl;
         let mut out = Vec::with_capacity(self.diag.contacts);
+        let bases = nl.chunk_bases();
         for i in 0..n {
             for k in nl.own_start[i] as usize..nl.own_start[i + 1] as usize {
                 let j = nl.pair_j[k] as usize;
@@ -488,7 +604,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 if D::STREAMING {
                     vrel += self.domain.streaming_velocity(&d);
                 }
-                let mut h = nl.hist[k];
+                let c = i / CHUNK;
+                let mut h = match self.hist.get(c) {
+                    Some(l) => l.get((k as u64 - bases[c]) as u32),
+                    None => T::History::default(),
+                };
                 let pf = self.law.eval(&nrm, rs - r, rs, meff, &vrel, &mut h, 0.0);
                 out.push((i, j, d, pf.f));
             }
@@ -528,8 +648,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             return true;
         }
         let hdt = 0.5 * self.dt;
-        let lim = 0.25 * self.nl.skin * self.nl.skin;
-        let dom = &self.domain;
+        let lim = self.nl.moved_limit2();
         let xb = &self.nl.x_build;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
@@ -546,7 +665,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 for l in 0..a.len() {
                     let i = c * CHUNK + l;
                     let xi = x[i];
-                    moved |= dom.delta(&xi, &xb[i]).norm_squared() > lim;
+                    // positions are not wrapped between builds: the plain difference is the
+                    // displacement
+                    moved |= (xi - widen(&xb[i])).norm_squared() > lim;
                     a[l] = [xi.x, xi.y, xi.z, rad[i]];
                     let vp = v[i] + (hdt * im[i]) * f[i];
                     let wp = om[i] + (hdt * ii[i]) * t[i];
@@ -682,22 +803,28 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let want_vir = VIR;
         let want_stats = STATS;
         let n = self.p.len();
-        let ncross = self.nl.n_cross();
-        if self.cross.len() != ncross {
-            self.cross.resize(ncross, PairOut::default());
+        let nchunks = n.div_ceil(CHUNK);
+        // lists exist from the first build on; keep them sized to the chunks
+        self.hist.resize_with(nchunks, HistList::default);
+        self.hist_next.resize_with(nchunks, HistList::default);
+        self.whist.resize_with(nchunks, HistList::default);
+        self.whist_next.resize_with(nchunks, HistList::default);
+        self.cross.resize_with(nchunks, Vec::new);
+        self.cross_stats.resize_with(nchunks, Vec::new);
+        if self.cross_idx.len() != self.nl.n_cross() {
+            self.cross_idx.clear();
+            self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
         }
         if want_stats {
             self.pstats.clear();
             self.pstats.resize(n, [0.0; 10]);
-            self.cross_stats.clear();
-            self.cross_stats.resize(ncross, [0.0; 10]);
         }
         let law = &self.law;
         let dom = &self.domain;
         let g = self.body.g();
         let planes = self.walls.planes();
         let wlaw = self.walls.law();
-        let nl = &mut self.nl;
+        let nl = &self.nl;
         let own_start = &nl.own_start;
         let pair_j = &nl.pair_j;
         let pair_img = &nl.pair_img;
@@ -705,84 +832,54 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let xr = &self.xr;
         let kin = &self.kin;
         let mass = &self.p.mass;
-        let nchunks = n.div_ceil(CHUNK);
 
-        // split the per-pair and per-chunk arrays into the pieces each chunk owns
-        struct Piece<'a, H, WH> {
-            c: usize,
-            hist: &'a mut [H],
-            flag: &'a mut [u8],
-            cross: &'a mut [PairOut],
-            cstat: &'a mut [[f64; 10]],
-            ps: &'a mut [[f64; 10]],
-            wh: &'a mut [WH],
-        }
-        let mut pieces = Vec::with_capacity(nchunks);
+        // the pieces of the per-chunk and per-slot arrays each chunk owns
+        let mut cidx_pieces: Vec<&mut [u32]> = Vec::with_capacity(nchunks);
         {
-            let mut h: &mut [T::History] = &mut nl.hist;
-            let mut fl: &mut [u8] = &mut self.in_contact;
-            let mut cr: &mut [PairOut] = &mut self.cross;
-            let mut cs: &mut [[f64; 10]] = &mut self.cross_stats;
-            let mut ps: &mut [[f64; 10]] = &mut self.pstats;
-            let mut wh: &mut [[T::History; MAX_WALLS]] = &mut self.wall_hist;
+            let mut rest: &mut [u32] = &mut self.cross_idx;
             for c in 0..nchunks {
-                let i0 = c * CHUNK;
-                let i1 = ((c + 1) * CHUNK).min(n);
-                let np = (own_start[i1] - own_start[i0]) as usize;
-                let nx = (nl.cross_off[c + 1] - nl.cross_off[c]) as usize;
-                let (a, rest) = std::mem::take(&mut h).split_at_mut(np);
-                h = rest;
-                let (b, rest) = std::mem::take(&mut fl).split_at_mut(np);
-                fl = rest;
-                let (x, rest) = std::mem::take(&mut cr).split_at_mut(nx);
-                cr = rest;
-                let (cst, pst) = if want_stats {
-                    let (u, rest) = std::mem::take(&mut cs).split_at_mut(nx);
-                    cs = rest;
-                    let (v, rest) = std::mem::take(&mut ps).split_at_mut(i1 - i0);
-                    ps = rest;
-                    (u, v)
-                } else {
-                    (&mut [][..], &mut [][..])
-                };
-                let w = if W::ON {
-                    let (u, rest) = std::mem::take(&mut wh).split_at_mut(i1 - i0);
-                    wh = rest;
-                    u
-                } else {
-                    &mut [][..]
-                };
-                pieces.push(Piece {
-                    c,
-                    hist: a,
-                    flag: b,
-                    cross: x,
-                    cstat: cst,
-                    ps: pst,
-                    wh: w,
-                });
+                let len = (nl.cross_off[c + 1] - nl.cross_off[c]) as usize;
+                let (a, r) = std::mem::take(&mut rest).split_at_mut(len);
+                rest = r;
+                cidx_pieces.push(a);
             }
         }
+        let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
+            self.pstats.chunks_mut(CHUNK).collect()
+        } else {
+            (0..nchunks).map(|_| &mut [][..]).collect()
+        };
+        let pieces: Vec<_> = (0..nchunks)
+            .zip(self.hist.iter())
+            .zip(self.hist_next.iter_mut())
+            .zip(self.whist.iter())
+            .zip(self.whist_next.iter_mut())
+            .zip(self.cross.iter_mut())
+            .zip(self.cross_stats.iter_mut())
+            .zip(cidx_pieces)
+            .zip(ps_pieces.drain(..))
+            .map(|((((((((c, ho), hn), wo), wn), cr), cs), ci), ps)| {
+                (c, ho, hn, wo, wn, cr, cs, ci, ps)
+            })
+            .collect();
 
         let results: Vec<ChunkOut> = pieces
             .into_par_iter()
             .zip(self.p.force.par_chunks_mut(CHUNK))
             .zip(self.p.torque.par_chunks_mut(CHUNK))
             .map(|((pc, fo), to)| {
-                let Piece {
-                    c,
-                    hist,
-                    flag,
-                    cross,
-                    cstat,
-                    ps,
-                    wh,
-                } = pc;
+                let (c, hold, hnew, wold, wnew, cross, cstat, cidx, ps) = pc;
                 let mut out = ChunkOut::default();
                 let i0 = c * CHUNK;
                 let i1 = i0 + fo.len();
                 let base = own_start[i0] as usize;
                 let mut xs = 0usize;
+                let mut hc = Cursor::new(hold);
+                let mut wc = Cursor::new(wold);
+                hnew.clear();
+                wnew.clear();
+                cross.clear();
+                cstat.clear();
                 fo.iter_mut().for_each(|f| *f = V3::zeros());
                 to.iter_mut().for_each(|t| *t = V3::zeros());
                 for i in i0..i1 {
@@ -798,7 +895,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     let wi = V3::new(ki[4], ki[5], ki[6]);
                     let imi = ki[3];
                     for k in k0..k1 {
-                        let kk = k - base;
                         // SAFETY: list indices are < n by construction (built from 0..n).
                         let j = unsafe { *pair_j.get_unchecked(k) } as usize;
                         let is_cross = j >= i1;
@@ -809,19 +905,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         let r2 = d.norm_squared();
                         let rs = ri + rj;
                         if r2 >= rs * rs {
-                            if unsafe { *flag.get_unchecked(kk) } != 0 {
-                                // the contact just opened: drop its history
-                                if T::FRICTIONAL {
-                                    hist[kk] = T::History::default();
-                                }
-                                flag[kk] = 0;
+                            // open: nothing stored (its history, if any, is not carried on)
+                            if is_cross {
+                                cidx[xs] = u32::MAX;
+                                xs += 1;
                             }
-                            // an open cross pair's slot is skipped by its flag in phase 2
-                            xs += is_cross as usize;
                             continue;
                         }
-                        unsafe { *flag.get_unchecked_mut(kk) = 1 };
                         out.contacts += 1;
+                        let kk = (k - base) as u32;
                         let r = r2.sqrt();
                         let kj = unsafe { kin.get_unchecked(j) };
                         // one division for 1/r, 1/(R_i+R_j) and m_eff = 1/(1/m_i + 1/m_j)
@@ -847,20 +939,21 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         if D::STREAMING {
                             vrel += dom.streaming_velocity(&d);
                         }
-                        let pf = law.eval(
-                            &nrm,
-                            delta,
-                            rs,
-                            meff,
-                            &vrel,
-                            unsafe { hist.get_unchecked_mut(kk) },
-                            dt,
-                        );
+                        let mut h = if T::FRICTIONAL {
+                            hc.take(kk)
+                        } else {
+                            T::History::default()
+                        };
+                        let pf = law.eval(&nrm, delta, rs, meff, &vrel, &mut h, dt);
+                        if T::FRICTIONAL {
+                            hnew.push(kk, h);
+                        }
                         let qv = -arm * nrm.cross(&pf.ft);
                         fsum += pf.f;
                         tsum += ri * qv;
                         if is_cross {
-                            cross[xs] = PairOut { f: pf.f, q: qv };
+                            cidx[xs] = cross.len() as u32;
+                            cross.push(PairOut { f: pf.f, q: qv });
                         } else {
                             let lj = j - i0;
                             fo[lj] -= pf.f;
@@ -883,25 +976,18 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                             rec[9] = 0.5 * pf.f.dot(&vrel);
                             add10(&mut ps[li], &rec);
                             if is_cross {
-                                cstat[xs] = rec;
+                                cstat.push(rec);
                             } else {
                                 add10(&mut ps[j - i0], &rec);
                             }
                         }
-                        if is_cross {
-                            xs += 1;
-                        }
+                        xs += is_cross as usize;
                     }
                     if W::ON {
                         let wl = wlaw.unwrap();
-                        let hs = &mut wh[li];
                         for (w, pl) in planes.iter().enumerate() {
                             let gap = pl.sign * (xi[pl.axis] - pl.pos);
                             if gap >= ri {
-                                // read before write: most particles never touch a wall
-                                if T::FRICTIONAL && hs[w] != T::History::default() {
-                                    hs[w] = T::History::default();
-                                }
                                 continue;
                             }
                             let mut nrm = V3::zeros();
@@ -910,7 +996,16 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                             // contact point on the plane: lever arm = gap; predicted
                             // end-of-step velocities, as for pairs
                             let vrel = vi - (gap * wi).cross(&nrm);
-                            let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut hs[w], dt);
+                            let key = (li * MAX_WALLS + w) as u32;
+                            let mut h = if T::FRICTIONAL {
+                                wc.take(key)
+                            } else {
+                                T::History::default()
+                            };
+                            let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut h, dt);
+                            if T::FRICTIONAL {
+                                wnew.push(key, h);
+                            }
                             fsum += pf.f;
                             tsum -= gap * nrm.cross(&pf.ft);
                             out.wall_force[w] -= pf.f;
@@ -936,11 +1031,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     fo[li] = fsum;
                     to[li] = tsum;
                 }
-                debug_assert_eq!(xs, cross.len());
-                let _ = &cross;
+                debug_assert_eq!(xs, cidx.len());
                 out
             })
             .collect();
+        std::mem::swap(&mut self.hist, &mut self.hist_next);
+        std::mem::swap(&mut self.whist, &mut self.whist_next);
 
         let tp = Instant::now();
         let mut diag = StepDiag::default();
@@ -956,22 +1052,27 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
         }
 
-        // Phase 2: cross pairs onto their second particles, in list order.
-        if ncross > 0 {
+        // Phase 2: cross pairs in contact onto their second particles, in list order.
+        if nl.n_cross() > 0 {
             let cross = &self.cross;
             let cstat = &self.cross_stats;
+            let cidx = &self.cross_idx;
+            let off = &nl.cross_off;
             let cs = &nl.cross_start;
             let slot = &nl.cross_slot;
-            let cross_k = &nl.cross_k;
-            let flags = &self.in_contact;
             let rad = &self.p.radius;
-            let pstats_ptr = SyncPtr(self.pstats.as_mut_ptr());
+            let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
+                self.pstats.chunks_mut(CHUNK).collect()
+            } else {
+                (0..nchunks).map(|_| &mut [][..]).collect()
+            };
             self.p
                 .force
                 .par_chunks_mut(CHUNK)
                 .zip(self.p.torque.par_chunks_mut(CHUNK))
+                .zip(ps_pieces.par_drain(..))
                 .enumerate()
-                .for_each(|(c, (fo, to))| {
+                .for_each(|(c, ((fo, to), ps))| {
                     let i0 = c * CHUNK;
                     for l in 0..fo.len() {
                         let i = i0 + l;
@@ -982,23 +1083,20 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         let mut f = fo[l];
                         let mut t = to[l];
                         for &s in &slot[a..b] {
-                            if flags[cross_k[s as usize] as usize] != 0 {
-                                let o = &cross[s as usize];
+                            let e = cidx[s as usize];
+                            if e != u32::MAX {
+                                // the chunk that owns slot s (slots are numbered by chunk)
+                                let src = off.partition_point(|&o| o <= s) - 1;
+                                let o = &cross[src][e as usize];
                                 f -= o.f;
                                 t += rad[i] * o.q;
+                                if want_stats {
+                                    add10(&mut ps[l], &cstat[src][e as usize]);
+                                }
                             }
                         }
                         fo[l] = f;
                         to[l] = t;
-                        if want_stats {
-                            // SAFETY: pstats has n entries when want_stats; i is owned here.
-                            let acc = unsafe { &mut *pstats_ptr.get().add(i) };
-                            for &s in &slot[a..b] {
-                                if flags[cross_k[s as usize] as usize] != 0 {
-                                    add10(acc, &cstat[s as usize]);
-                                }
-                            }
-                        }
                     }
                 });
         }

@@ -12,6 +12,7 @@ pub mod contact;
 pub mod domain;
 pub mod engine;
 pub mod error;
+pub mod history;
 pub mod insert;
 pub mod neighbor;
 pub mod particles;

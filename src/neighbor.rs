@@ -1,20 +1,17 @@
 //! Cell lists and a Verlet pair list with a skin.
 //!
 //! The list is a half list in CSR form, built particle by particle after a spatial sort (particles
-//! are re-ordered by cell at every build, so neighbours are close in memory). Each pair stores its
-//! tangential history in list order, so the force loop streams through pairs with no lookups.
-//! Histories are carried across rebuilds by the stable particle ids; a history is reset to zero
-//! whenever its contact opens, so a contact that re-forms starts from zero displacement.
+//! are re-ordered by cell at every build, so neighbours are close in memory). Tangential
+//! histories live with the engine, per contact (`crate::history`), and are carried across
+//! builds by the stable particle ids.
 //!
 //! Determinism: the list, the order of pairs and every reduction over them depend only on the
 //! positions, never on the number of threads.
 
-use crate::contact::Friction;
 use crate::domain::Domain;
 use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// Particles per work unit when building; fixed so that results do not depend on thread count.
 const BUILD_CHUNK: usize = 512;
@@ -25,7 +22,7 @@ const BUILD_CHUNK: usize = 512;
 pub const CHUNK: usize = 512;
 
 #[derive(Clone, Debug)]
-pub struct NeighborList<T: Friction> {
+pub struct NeighborList {
     pub skin: f64,
     /// Second particle of each pair; pairs of particle i are own_start[i]..own_start[i+1]
     /// (i ascending, j > i).
@@ -34,8 +31,6 @@ pub struct NeighborList<T: Friction> {
     /// build): r_ij = x_i - x_j - H n with n in {-1,0,1}^3 coded as 9(n0+1) + 3(n1+1) + n2+1
     /// (see [`image_shifts`]). Replaces a minimum-image computation per pair and step.
     pub pair_img: Vec<u8>,
-    /// Tangential history per pair, in list order (zero-sized without friction).
-    pub hist: Vec<T::History>,
     /// own_start[i]..own_start[i+1]: pairs whose first particle is i.
     pub own_start: Vec<u32>,
     /// Cross pairs (second particle in a later chunk) are numbered in list order; chunk c owns
@@ -45,27 +40,27 @@ pub struct NeighborList<T: Friction> {
     /// particle is j, in list order.
     pub cross_start: Vec<u32>,
     pub cross_slot: Vec<u32>,
-    /// Pair index of each cross slot (its contact flag tells phase 2 whether the slot is set).
-    pub cross_k: Vec<u32>,
     /// Positions at the last build (for the half-skin criterion).
-    pub x_build: Vec<V3>,
+    /// (single precision: it only decides when to rebuild, with `xb_eps` as the margin).
+    pub x_build: Vec<[f32; 3]>,
+    /// Bound on the rounding of `x_build`.
+    pub xb_eps: f64,
     pub builds: u64,
     pub valid: bool,
 }
 
-impl<T: Friction> NeighborList<T> {
+impl NeighborList {
     pub fn new(skin: f64) -> Self {
         NeighborList {
             skin,
             pair_j: vec![],
             pair_img: vec![],
-            hist: vec![],
             own_start: vec![],
             cross_off: vec![],
             cross_start: vec![],
             cross_slot: vec![],
-            cross_k: vec![],
             x_build: vec![],
+            xb_eps: 0.0,
             builds: 0,
             valid: false,
         }
@@ -77,6 +72,25 @@ impl<T: Friction> NeighborList<T> {
     pub fn is_empty(&self) -> bool {
         self.pair_j.is_empty()
     }
+    /// List index of the pair (i, j), i < j, if listed.
+    pub fn find(&self, i: usize, j: usize) -> Option<usize> {
+        let (a, b) = (self.own_start[i] as usize, self.own_start[i + 1] as usize);
+        self.pair_j[a..b]
+            .iter()
+            .position(|&x| x as usize == j)
+            .map(|p| a + p)
+    }
+
+    /// First global pair index of every force-loop chunk, then the total.
+    pub fn chunk_bases(&self) -> Vec<u64> {
+        let n = self.own_start.len().saturating_sub(1);
+        let mut b: Vec<u64> = (0..n.div_ceil(CHUNK))
+            .map(|c| self.own_start[c * CHUNK] as u64)
+            .collect();
+        b.push(self.pair_j.len() as u64);
+        b
+    }
+
     /// Number of cross pairs (buffered between chunks).
     pub fn n_cross(&self) -> usize {
         self.cross_slot.len()
@@ -97,33 +111,25 @@ impl<T: Friction> NeighborList<T> {
         if !self.valid || self.x_build.len() != p.len() {
             return true;
         }
-        let lim = 0.25 * self.skin * self.skin;
+        let lim = self.moved_limit2();
         p.x.par_iter()
             .zip(self.x_build.par_iter())
             .with_min_len(4096)
-            .any(|(x, x0)| dom.delta(x, x0).norm_squared() > lim)
+            .any(|(x, x0)| dom.delta(x, &widen(x0)).norm_squared() > lim)
     }
 
-    /// Rebuild: spatially sort particles (returns the permutation applied, new[k] = old[perm[k]]),
-    /// rebuild the pair list, carry the histories of open contacts over by particle id.
-    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) -> Vec<usize> {
-        let frictional = T::FRICTIONAL;
-        let n = p.len();
-        // 1. histories of contacts, keyed by stable ids, oriented from the smaller id
-        let mut carried: HashMap<u64, (T::History, bool)> = HashMap::new();
-        if frictional && self.valid {
-            let zero = T::History::default();
-            let pair_i = self.pair_i();
-            for ((&i, &j), &h) in pair_i.iter().zip(&self.pair_j).zip(&self.hist) {
-                if h != zero {
-                    let a = p.id[i as usize];
-                    let b = p.id[j as usize];
-                    let (key, flipped) = pair_key(a, b);
-                    carried.insert(key, (h, flipped));
-                }
-            }
-        }
+    /// Squared displacement since the build beyond which the list must be rebuilt: half the
+    /// skin, less the rounding of the stored positions.
+    #[inline]
+    pub fn moved_limit2(&self) -> f64 {
+        let h = (0.5 * self.skin - 2.0 * self.xb_eps).max(0.0);
+        h * h
+    }
 
+    /// Rebuild: spatially sort particles (returns the permutation applied, new[k] = old[perm[k]])
+    /// and rebuild the pair list. The engine carries the contact histories over by particle id.
+    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) -> Vec<usize> {
+        let n = p.len();
         // 2. cells in fractional coordinates
         let rmax = p.max_radius();
         let cut = 2.0 * rmax + self.skin;
@@ -143,11 +149,15 @@ impl<T: Friction> NeighborList<T> {
             (c[2] * nb[1] + c[1]) * nb[0] + c[0]
         };
         let cells: Vec<u32> = p.x.par_iter().map(|x| cell_of(x) as u32).collect();
+        // Cells are visited in Morton (Z-curve) order: a run of consecutive particles (a
+        // force-loop chunk) is then a compact blob, so few of its pairs reach into another
+        // chunk and neighbours sit close in memory at any system size.
+        let rank_of = morton_ranks(nb);
 
-        // 3. counting sort by cell (stable) -> permutation
+        // 3. counting sort by cell rank (stable) -> permutation
         let mut start = vec![0u32; ncell + 1];
         for &c in &cells {
-            start[c as usize + 1] += 1;
+            start[rank_of[c as usize] as usize + 1] += 1;
         }
         for c in 0..ncell {
             start[c + 1] += start[c];
@@ -155,8 +165,9 @@ impl<T: Friction> NeighborList<T> {
         let mut fill = start.clone();
         let mut perm = vec![0usize; n];
         for (i, &c) in cells.iter().enumerate() {
-            perm[fill[c as usize] as usize] = i;
-            fill[c as usize] += 1;
+            let r = rank_of[c as usize] as usize;
+            perm[fill[r] as usize] = i;
+            fill[r] += 1;
         }
         let identity = perm.iter().enumerate().all(|(k, &v)| k == v);
         if !identity {
@@ -218,7 +229,7 @@ impl<T: Friction> NeighborList<T> {
                     for &oz in &tz[..nz] {
                         for &oy in &ty[..ny] {
                             for &ox in &tx[..nx] {
-                                let cc = (oz * nb[1] + oy) * nb[0] + ox;
+                                let cc = rank_of[(oz * nb[1] + oy) * nb[0] + ox] as usize;
                                 let (a, b) = (start_ref[cc] as usize, start_ref[cc + 1] as usize);
                                 let xi = x[i];
                                 let ri = rad[i] + skin;
@@ -255,27 +266,13 @@ impl<T: Friction> NeighborList<T> {
         }
         self.build_cross(n);
         self.set_images(&p.x, dom, &hinv);
-        let np = self.pair_j.len();
 
-        // 6. histories
-        self.hist = vec![T::History::default(); np];
-        if frictional && !carried.is_empty() {
-            let pair_i = self.pair_i();
-            for (k, (&i, &j)) in pair_i.iter().zip(&self.pair_j).enumerate() {
-                let a = p.id[i as usize];
-                let b = p.id[j as usize];
-                let (key, flipped) = pair_key(a, b);
-                if let Some(&(h, was_flipped)) = carried.get(&key) {
-                    self.hist[k] = if flipped == was_flipped {
-                        h
-                    } else {
-                        T::flip(h)
-                    };
-                }
-            }
-        }
         self.x_build.clear();
-        self.x_build.extend_from_slice(&p.x);
+        self.x_build
+            .extend(p.x.iter().map(|x| [x.x as f32, x.y as f32, x.z as f32]));
+        let xmax = p.x.iter().map(|x| x.amax()).fold(0.0f64, f64::max);
+        // |x - (x as f32)| <= 2^-24 |x| per coordinate; sqrt(3) for the vector
+        self.xb_eps = 1.8 * xmax * f64::from(f32::EPSILON);
         self.builds += 1;
         self.valid = true;
         if identity {
@@ -286,18 +283,19 @@ impl<T: Friction> NeighborList<T> {
     }
 }
 
-impl<T: Friction> NeighborList<T> {
+impl NeighborList {
     /// Image code of every pair from the positions at the build (`x_build` on a restart).
     pub fn set_images<D: Domain>(&mut self, x: &[V3], dom: &D, hinv: &M3) {
         let n = x.len();
         let mut img = vec![0u8; self.pair_j.len()];
         for i in 0..n {
-            for k in self.own_start[i] as usize..self.own_start[i + 1] as usize {
-                let j = self.pair_j[k] as usize;
+            let (a, b) = (self.own_start[i] as usize, self.own_start[i + 1] as usize);
+            for (slot, &j) in img[a..b].iter_mut().zip(&self.pair_j[a..b]) {
+                let j = j as usize;
                 let shift = (x[i] - x[j]) - dom.delta(&x[i], &x[j]);
                 let s = hinv * shift;
                 let c = |a: f64| (a.round().clamp(-1.0, 1.0) + 1.0) as u8;
-                img[k] = 9 * c(s[0]) + 3 * c(s[1]) + c(s[2]);
+                *slot = 9 * c(s[0]) + 3 * c(s[1]) + c(s[2]);
             }
         }
         self.pair_img = img;
@@ -311,7 +309,6 @@ impl<T: Friction> NeighborList<T> {
         self.cross_start.clear();
         self.cross_start.resize(n + 1, 0);
         let mut partner: Vec<u32> = Vec::new();
-        self.cross_k.clear();
         for c in 0..nchunks {
             self.cross_off.push(partner.len() as u32);
             let end = ((c + 1) * CHUNK).min(n) as u32;
@@ -319,10 +316,9 @@ impl<T: Friction> NeighborList<T> {
                 self.own_start[c * CHUNK] as usize,
                 self.own_start[((c + 1) * CHUNK).min(n)] as usize,
             );
-            for (k, &j) in self.pair_j[lo..hi].iter().enumerate() {
+            for &j in &self.pair_j[lo..hi] {
                 if j >= end {
                     partner.push(j);
-                    self.cross_k.push((lo + k) as u32);
                     self.cross_start[j as usize + 1] += 1;
                 }
             }
@@ -338,6 +334,37 @@ impl<T: Friction> NeighborList<T> {
             fill[j as usize] += 1;
         }
     }
+}
+
+/// A stored single-precision position as a vector.
+#[inline(always)]
+pub fn widen(x: &[f32; 3]) -> V3 {
+    V3::new(x[0] as f64, x[1] as f64, x[2] as f64)
+}
+
+/// Rank of every cell (linear index (z nb_y + y) nb_x + x) along the Morton curve.
+fn morton_ranks(nb: [usize; 3]) -> Vec<u32> {
+    fn spread(v: usize) -> u64 {
+        // bits of v (< 2^10) to every third bit
+        let mut x = v as u64 & 0x3ff;
+        x = (x | (x << 16)) & 0x0300_00ff;
+        x = (x | (x << 8)) & 0x0300_f00f;
+        x = (x | (x << 4)) & 0x030c_30c3;
+        (x | (x << 2)) & 0x0924_9249
+    }
+    let ncell = nb[0] * nb[1] * nb[2];
+    let mut codes: Vec<(u64, u32)> = (0..ncell)
+        .map(|c| {
+            let (x, y, z) = (c % nb[0], (c / nb[0]) % nb[1], c / (nb[0] * nb[1]));
+            (spread(x) | spread(y) << 1 | spread(z) << 2, c as u32)
+        })
+        .collect();
+    codes.sort_unstable();
+    let mut rank = vec![0u32; ncell];
+    for (r, &(_, c)) in codes.iter().enumerate() {
+        rank[c as usize] = r as u32;
+    }
+    rank
 }
 
 /// The 27 lattice shifts H n indexed by image code (see `pair_img`).

@@ -116,22 +116,37 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     + vec_bytes(&nl.cross_off)
                     + vec_bytes(&nl.cross_start)
                     + vec_bytes(&nl.cross_slot)
-                    + vec_bytes(&nl.cross_k)
                     + vec_bytes(&nl.pair_img)
-                    + vec_bytes(&nl.x_build)
-                    + vec_bytes(&self.in_contact),
+                    + vec_bytes(&nl.x_build),
             ),
             (
-                "cross-chunk pair forces".to_string(),
-                vec_bytes(&self.cross),
+                "cross-chunk contact forces".to_string(),
+                self.cross.iter().map(vec_bytes).sum::<usize>()
+                    + self.cross_idx.capacity() * 4
+                    + self.cross.capacity() * std::mem::size_of::<Vec<crate::engine::PairOut>>(),
             ),
             (
                 "packed step records".to_string(),
                 vec_bytes(&self.xr) + vec_bytes(&self.kin),
             ),
-            ("tangential history".to_string(), vec_bytes(&nl.hist)),
-            ("wall history".to_string(), vec_bytes(&self.wall_hist)),
+            ("tangential history".to_string(), self.hist_bytes()),
+            ("wall history".to_string(), self.whist_bytes()),
         ]
+    }
+
+    fn hist_bytes(&self) -> usize {
+        self.hist
+            .iter()
+            .chain(self.hist_next_ref())
+            .map(|l| l.bytes())
+            .sum()
+    }
+    fn whist_bytes(&self) -> usize {
+        self.whist
+            .iter()
+            .chain(self.whist_next_ref())
+            .map(|l| l.bytes())
+            .sum()
     }
 
     pub fn elastic_energy_sum(&self) -> f64 {
@@ -267,20 +282,34 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let nl = &self.nl;
         w.u32s("nl.pair_j", &nl.pair_j);
         w.u32s("nl.own_start", &nl.own_start);
-        w.f64s("nl.x_build", &flat_v3(&nl.x_build));
+        let xb: Vec<f64> = nl.x_build.iter().flatten().map(|&c| c as f64).collect();
+        w.f64s("nl.x_build", &xb);
+        w.f64s("nl.xb_eps", &[nl.xb_eps]);
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
-        if T::FRICTIONAL {
-            let h: Vec<f64> = nl.hist.iter().flat_map(T::to_array).collect();
-            w.f64s("nl.hist", &h);
-            let wh: Vec<f64> = self
-                .wall_hist
-                .iter()
-                .flat_map(|a| a.iter().flat_map(T::to_array).collect::<Vec<_>>())
-                .collect();
-            w.f64s("walls.hist", &wh);
-        }
-        let flags: Vec<u32> = self.in_contact.iter().map(|&f| f as u32).collect();
-        w.u32s("in_contact", &flags);
+        // contact histories by particle ids (placed back into the list on loading)
+        let (hp, hw) = self.carried_histories();
+        w.u32s(
+            "hist.pair_ids",
+            &hp.iter().flat_map(|e| [e.0, e.1]).collect::<Vec<_>>(),
+        );
+        w.f64s(
+            "hist.pairs",
+            &hp.iter()
+                .flat_map(|e| T::to_array(&e.2))
+                .collect::<Vec<_>>(),
+        );
+        w.u32s(
+            "hist.wall_ids",
+            &hw.iter()
+                .flat_map(|e| [e.0, e.1 as u32])
+                .collect::<Vec<_>>(),
+        );
+        w.f64s(
+            "hist.walls",
+            &hw.iter()
+                .flat_map(|e| T::to_array(&e.2))
+                .collect::<Vec<_>>(),
+        );
         w.f64s("domain", &self.domain.save_state());
         let imp: Vec<f64> = self
             .wall_impulse
@@ -363,30 +392,38 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             ));
         }
         nl.build_cross(n);
-        nl.x_build = unflat_v3(&r.f64s("nl.x_build")?);
+        nl.x_build = r
+            .f64s("nl.x_build")?
+            .chunks_exact(3)
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect();
+        nl.xb_eps = r.f64s("nl.xb_eps")?.first().copied().unwrap_or(0.0);
         let meta = r.u64s("nl.meta")?;
         nl.builds = meta[0];
         nl.valid = meta[1] != 0;
-        let np = nl.pair_j.len();
-        nl.hist = vec![T::History::default(); np];
-        if T::FRICTIONAL {
-            let h = r.f64s("nl.hist")?;
-            for (k, c) in h.chunks_exact(3).enumerate().take(np) {
-                nl.hist[k] = T::from_array([c[0], c[1], c[2]]);
-            }
-            if W::ON {
-                let wh = r.f64s("walls.hist")?;
-                let per = 3 * crate::engine::MAX_WALLS;
-                for (i, c) in wh.chunks_exact(per).enumerate().take(n) {
-                    for w in 0..crate::engine::MAX_WALLS {
-                        self.wall_hist[i][w] =
-                            T::from_array([c[3 * w], c[3 * w + 1], c[3 * w + 2]]);
-                    }
-                }
-            }
+        let ids = r.u32s("hist.pair_ids")?;
+        let vals = r.f64s("hist.pairs")?;
+        let pairs: Vec<(u32, u32, T::History)> = ids
+            .chunks_exact(2)
+            .zip(vals.chunks_exact(3))
+            .map(|(a, v)| (a[0], a[1], T::from_array([v[0], v[1], v[2]])))
+            .collect();
+        let ids = r.u32s("hist.wall_ids")?;
+        let vals = r.f64s("hist.walls")?;
+        let walls: Vec<(u32, u8, T::History)> = ids
+            .chunks_exact(2)
+            .zip(vals.chunks_exact(3))
+            .map(|(a, v)| (a[0], a[1] as u8, T::from_array([v[0], v[1], v[2]])))
+            .collect();
+        if pairs.iter().any(|e| e.0 as usize >= n || e.1 as usize >= n)
+            || walls
+                .iter()
+                .any(|e| e.0 as usize >= n || e.1 as usize >= crate::engine::MAX_WALLS)
+        {
+            return Err(bad("contact history refers to unknown particles".into()));
         }
-        self.cross = vec![crate::engine::PairOut::default(); self.nl.n_cross()];
-        self.in_contact = r.u32s("in_contact")?.iter().map(|&f| f as u8).collect();
+        self.set_histories(&pairs, &walls);
+        self.cross_idx = vec![u32::MAX; self.nl.n_cross()];
         self.domain.load_state(&r.f64s("domain")?)?;
         // the pairs' periodic images follow from the positions at the last build
         let hinv = self
@@ -394,9 +431,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .h()
             .try_inverse()
             .unwrap_or_else(crate::M3::zeros);
-        let xb = std::mem::take(&mut self.nl.x_build);
+        let xb: Vec<crate::V3> = self.nl.x_build.iter().map(crate::neighbor::widen).collect();
         self.nl.set_images(&xb, &self.domain, &hinv);
-        self.nl.x_build = xb;
         for (k, c) in r.f64s("walls.impulse")?.chunks_exact(3).enumerate() {
             self.wall_impulse[k] = crate::V3::new(c[0], c[1], c[2]);
         }

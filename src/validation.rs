@@ -320,7 +320,7 @@ fn reformed_contact_starts_from_zero_history() {
         }
         if phase == 1 && now == 0 {
             // contact opened: history dropped
-            assert!(s.nl.hist.iter().all(|h| *h == [0.0; 3]));
+            assert!(s.pair_histories().iter().all(|h| *h == [0.0; 3]));
             // send them back at each other
             let a = s.p.id.iter().position(|&k| k == 0).unwrap();
             let b = 1 - a;
@@ -332,7 +332,8 @@ fn reformed_contact_starts_from_zero_history() {
         }
         if phase == 2 && was == 0 && now == 1 {
             // first step of the new contact: |u| = |v_t| dt (history started from zero)
-            let h = s.nl.hist.iter().find(|h| **h != [0.0; 3]).unwrap();
+            let hs = s.pair_histories();
+            let h = hs.iter().find(|h| **h != [0.0; 3]).unwrap();
             let u = V3::new(h[0], h[1], h[2]).norm();
             let a = s.p.id.iter().position(|&k| k == 0).unwrap();
             let b = 1 - a;
