@@ -28,7 +28,12 @@ def test_registry_covers_the_issue():
             "channel_jammed_0.66", "channel_free_fall_0.05"} <= names
     assert {f"channel_kn_{k}" for k in ("1e+05", "1e+06", "1e+07", "1e+08")} <= names
     assert {"cell_p_1e-06_tau_0", "cell_p_1e-06_tau_1.2", "cell_p_1e-03_tau_0",
-            "cell_p_1e-03_tau_1.2"} <= names
+            "cell_p_1e-03_tau_1.2", "cell_energy_balance"} <= names
+    # above yield the cell must stop with the kernel's InstabilityError, not finish
+    for p in ("1e-06", "1e-03"):
+        c = st.CASES[f"cell_p_{p}_tau_1.2"]
+        assert c.expect == "unstable" and c.refuse_with == (st.InstabilityError,)
+    assert st.CASES["cell_energy_balance"].kind == "fast"
     assert all(c.kind in ("fast", "long") for c in st.CASES.values())
 
 
@@ -82,6 +87,13 @@ def test_scene_fast_cases_or_not_available(tmp_path):
     if ff["finished"]:
         assert "flow_state=accelerating" in ff["measured"]
         assert ff["energy_balance"] > -2e-2 and ff["work"] > 0
+    cb = row["cell_energy_balance"]
+    if cb["finished"]:
+        # the imposed stress does work, the contacts dissipate it, the ledger closes
+        assert cb["work"] > 0 and cb["dissipation"] > 0 and cb["energy_ok"] is True
+        assert abs(cb["energy_residual"]) <= st.CASES["cell_energy_balance"].closure_tol
+        assert cb["dissipation"] == pytest.approx(cb["work"], rel=0.1)  # steady: W ~ D
+        assert 0 < cb["energy_balance"] <= 1.0 + 1e-9
 
 
 def test_energy_balance_from_a_trace():

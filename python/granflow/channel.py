@@ -245,21 +245,46 @@ class Channel:
                 stiff_sim.set_velocities(np.zeros_like(x))
                 stiff_sim.set_angular_velocities(np.zeros_like(x))
             x = stiff_sim.get_positions()
-        self.sim = Simulation(
-            x, d, Box(length=(self.W, self.H, self.B), periodic=(False, True, True)), self.law,
-            density=self.density, walls=[Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0)],
-            wall_law=self.wall_law, gravity=(0.0, -1.0, 0.0), dt=self.dt, skin=self.skin,
-            threads=self.threads,
-        )
-        self.prep_info = {
+        self._release(x, d, {
             "n": int(len(d)),
             "phi_bar_achieved": vs / (self.W * self.H * self.B),
             "bed_top": top,
             "compressed": bool(compressed),
             "settle_time": float(sim.time),
             "settle_ke": float(ke),
-        }
+        })
+
+    def _release(self, x: np.ndarray, d: np.ndarray, prep_info: dict[str, Any]) -> None:
+        """The release: the run's simulation (periodic in y, walls, the run's law and dt) from
+        prepared positions ``x``, at rest."""
+        self.sim = Simulation(
+            x, d, Box(length=(self.W, self.H, self.B), periodic=(False, True, True)), self.law,
+            density=self.density, walls=[Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0)],
+            wall_law=self.wall_law, gravity=(0.0, -1.0, 0.0), dt=self.dt, skin=self.skin,
+            threads=self.threads,
+        )
+        self.prep_info = dict(prep_info)
         self._cache_static()
+
+    def prepare_from(self, other: Channel) -> None:
+        """Start from the prepared (released, at rest) packing of ``other`` instead of pouring
+        a new one: the same particles in the same place, with this channel's law, dt and
+        sampling (e.g. one packing run at several kn). ``other`` must be prepared and not yet
+        run, with the same geometry."""
+        if other.sim is None:
+            other.prepare()
+        core = other.sim._sim
+        for name in ("W", "H", "B", "density"):
+            if getattr(self, name) != getattr(other, name):
+                raise ParameterError(
+                    f"invalid {name} = {getattr(self, name)!r}: allowed {getattr(other, name)!r} "
+                    "(the packing's value)")
+        if core.step != 0:
+            raise ParameterError(
+                f"invalid source channel at step {core.step}: allowed a freshly prepared one "
+                "(step 0, at rest)")
+        self._release(np.array(core.positions()), np.array(core.diameters()),
+                      {**other.prep_info, "prepared_with_kn": other.kn})
 
     def _cache_static(self) -> None:
         core = self.sim._sim
