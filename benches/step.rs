@@ -40,6 +40,12 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
         e.nl.builds - b0,
         e.memory_list().iter().map(|(_, b)| *b as f64).sum::<f64>() / n as f64
     );
+    let mut by_id = vec![V3::zeros(); n];
+    for i in 0..n {
+        by_id[e.p.id[i] as usize] = e.p.x[i] + e.p.v[i];
+    }
+    let sum: f64 = by_id.iter().map(|x| x.x + 2.0 * x.y + 3.0 * x.z).sum();
+    println!("checksum (x + v by id) {sum:.17e}");
     for (name, b) in e.memory_list() {
         println!("  {name}: {:.1} B/particle", b as f64 / n as f64);
     }

@@ -21,6 +21,10 @@ pub trait Domain: Clone + Send + Sync + 'static {
     /// No external work is done on the particles by the domain (a static box): with no body
     /// force the total energy can only decrease, which the engine's energy guard checks.
     const CLOSED: bool = false;
+    /// Plain velocity Verlet (`nve_initial`/`nve_final`, no domain dynamics): the engine fuses
+    /// the kicks with its own passes over the particles. A domain that overrides
+    /// `integrate_initial`/`integrate_final` must set this to false.
+    const PLAIN_NVE: bool = true;
     /// The streaming velocity difference L r_ij for a displacement r_ij (only if `STREAMING`).
     #[inline(always)]
     fn streaming_velocity(&self, _rij: &V3) -> V3 {

@@ -531,10 +531,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     fn step_once(&mut self) -> Result<()> {
         let dt = self.dt;
         let t0 = Instant::now();
-        self.domain.integrate_initial(&mut self.p, dt);
+        // one pass over the particles: (for plain NVE) the half-kick and drift, then the
+        // displacement since the last build and the packed records for the pair loop
+        let moved = if D::PLAIN_NVE {
+            self.kick_drift_pack()
+        } else {
+            self.domain.integrate_initial(&mut self.p, dt);
+            self.check_and_pack()
+        };
         self.domain.check(self.step)?;
-        // one pass: displacement since the last build, packed records for the pair loop
-        let moved = self.check_and_pack();
         let t1 = Instant::now();
         if moved || !self.nl.valid || self.domain.rebuild_due(self.nl.skin) {
             self.rebuild();
@@ -542,15 +547,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         let t2 = Instant::now();
         let wf_old = self.diag.wall_force;
-        self.evaluate(dt);
+        // plain NVE: the final half-kick rides on the force loop's last pass
+        let kick = if D::PLAIN_NVE { 0.5 * dt } else { 0.0 };
+        self.evaluate(dt, kick);
         if W::ON {
             for (w, imp) in self.wall_impulse.iter_mut().enumerate() {
                 *imp += 0.5 * dt * (wf_old[w] + self.diag.wall_force[w]);
             }
         }
         let t3 = Instant::now();
-        let vir = self.diag.virial;
-        self.domain.integrate_final(&mut self.p, dt, &vir);
+        if !D::PLAIN_NVE {
+            let vir = self.diag.virial;
+            self.domain.integrate_final(&mut self.p, dt, &vir);
+        }
         let t4 = Instant::now();
         let tm = &mut self.timers;
         tm.integrate += (t1 - t0).as_secs_f64() + (t4 - t3).as_secs_f64();
@@ -638,6 +647,49 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     b[l] = [v.x, v.y, v.z, p.inv_mass[i], w.x, w.y, w.z, 0.0];
                 }
             });
+    }
+
+    /// `nve_initial` and `check_and_pack` in one pass (same arithmetic, same bits): at large N
+    /// the step is bound by memory traffic, and this reads each particle once.
+    fn kick_drift_pack(&mut self) -> bool {
+        let n = self.p.len();
+        if self.nl.x_build.len() != n {
+            crate::domain::nve_initial(&mut self.p, self.dt);
+            return true;
+        }
+        let dt = self.dt;
+        let h = 0.5 * dt;
+        let lim = self.nl.moved_limit2();
+        let xb = &self.nl.x_build;
+        self.xr.resize(n, [0.0; 4]);
+        self.kin.resize(n, [0.0; 8]);
+        let p = &mut self.p;
+        let (f, t) = (&p.force, &p.torque);
+        let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
+        p.x.par_chunks_mut(CHUNK)
+            .zip(p.v.par_chunks_mut(CHUNK))
+            .zip(p.omega.par_chunks_mut(CHUNK))
+            .zip(self.xr.par_chunks_mut(CHUNK))
+            .zip(self.kin.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(c, ((((x, v), w), a), b))| {
+                let mut moved = false;
+                for l in 0..x.len() {
+                    let i = c * CHUNK + l;
+                    let vn = v[l] + f[i] * (h * im[i]);
+                    v[l] = vn;
+                    x[l] += vn * dt;
+                    w[l] += t[i] * (h * ii[i]);
+                    let xi = x[l];
+                    moved |= (xi - widen(&xb[i])).norm_squared() > lim;
+                    a[l] = [xi.x, xi.y, xi.z, rad[i]];
+                    let vp = vn + (h * im[i]) * f[i];
+                    let wp = w[l] + (h * ii[i]) * t[i];
+                    b[l] = [vp.x, vp.y, vp.z, im[i], wp.x, wp.y, wp.z, 0.0];
+                }
+                moved
+            })
+            .reduce(|| false, |a, b| a || b)
     }
 
     /// Pack the step records; true if some particle moved more than half the skin since the
@@ -766,7 +818,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the tangential histories by one step (the evaluation inside a time step).
     pub fn compute_forces(&mut self) {
         self.pack();
-        self.evaluate(self.dt);
+        self.evaluate(self.dt, 0.0);
     }
 
     /// Evaluate forces without advancing any tangential history: no time has passed (the first
@@ -774,7 +826,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
         self.pack();
-        self.evaluate(0.0);
+        self.evaluate(0.0, 0.0);
     }
 
     /// Forces from the packed records (`pack` or `wrap_and_pack` must have run). `hist_dt`: the
@@ -786,18 +838,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// pair reaching into a later chunk adds to i and writes its force to its cross slot. Walls
     /// and gravity are added by the owner. Phase 2 adds the cross slots to their second
     /// particles in list order. Every sum has one order fixed by the list.
-    fn evaluate(&mut self, hist_dt: f64) {
+    /// `kick`: 0, or dt/2 to apply the final half-kick of a plain NVE step in the last pass.
+    fn evaluate(&mut self, hist_dt: f64, kick: f64) {
         // the statistics and virial paths are compiled separately, so the plain step carries
         // none of their code (nor its register pressure)
         match (self.want_stats, D::NEEDS_VIRIAL || self.want_virial) {
-            (false, false) => self.evaluate_with::<false, false>(hist_dt),
-            (false, true) => self.evaluate_with::<false, true>(hist_dt),
-            (true, false) => self.evaluate_with::<true, false>(hist_dt),
-            (true, true) => self.evaluate_with::<true, true>(hist_dt),
+            (false, false) => self.evaluate_with::<false, false>(hist_dt, kick),
+            (false, true) => self.evaluate_with::<false, true>(hist_dt, kick),
+            (true, false) => self.evaluate_with::<true, false>(hist_dt, kick),
+            (true, true) => self.evaluate_with::<true, true>(hist_dt, kick),
         }
     }
 
-    fn evaluate_with<const STATS: bool, const VIR: bool>(&mut self, hist_dt: f64) {
+    fn evaluate_with<const STATS: bool, const VIR: bool>(&mut self, hist_dt: f64, kick: f64) {
         let tstart = Instant::now();
         let dt = hist_dt;
         let want_vir = VIR;
@@ -1052,51 +1105,59 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
         }
 
-        // Phase 2: cross pairs in contact onto their second particles, in list order.
-        if nl.n_cross() > 0 {
+        // Phase 2: cross pairs in contact onto their second particles, in list order; for a
+        // plain NVE domain in a time step, the final half-kick in the same pass (the forces of
+        // particle i are complete once its cross pairs are added).
+        if nl.n_cross() > 0 || kick > 0.0 {
             let cross = &self.cross;
             let cstat = &self.cross_stats;
             let cidx = &self.cross_idx;
             let off = &nl.cross_off;
             let cs = &nl.cross_start;
             let slot = &nl.cross_slot;
-            let rad = &self.p.radius;
             let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
                 self.pstats.chunks_mut(CHUNK).collect()
             } else {
                 (0..nchunks).map(|_| &mut [][..]).collect()
             };
-            self.p
-                .force
+            let p = &mut self.p;
+            let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
+            p.force
                 .par_chunks_mut(CHUNK)
-                .zip(self.p.torque.par_chunks_mut(CHUNK))
+                .zip(p.torque.par_chunks_mut(CHUNK))
+                .zip(p.v.par_chunks_mut(CHUNK))
+                .zip(p.omega.par_chunks_mut(CHUNK))
                 .zip(ps_pieces.par_drain(..))
                 .enumerate()
-                .for_each(|(c, ((fo, to), ps))| {
+                .for_each(|(c, ((((fo, to), vo), wo), ps))| {
                     let i0 = c * CHUNK;
                     for l in 0..fo.len() {
                         let i = i0 + l;
                         let (a, b) = (cs[i] as usize, cs[i + 1] as usize);
-                        if a == b {
-                            continue;
-                        }
-                        let mut f = fo[l];
-                        let mut t = to[l];
-                        for &s in &slot[a..b] {
-                            let e = cidx[s as usize];
-                            if e != u32::MAX {
-                                // the chunk that owns slot s (slots are numbered by chunk)
-                                let src = off.partition_point(|&o| o <= s) - 1;
-                                let o = &cross[src][e as usize];
-                                f -= o.f;
-                                t += rad[i] * o.q;
-                                if want_stats {
-                                    add10(&mut ps[l], &cstat[src][e as usize]);
+                        if a < b {
+                            let mut f = fo[l];
+                            let mut t = to[l];
+                            for &s in &slot[a..b] {
+                                let e = cidx[s as usize];
+                                if e != u32::MAX {
+                                    // the chunk that owns slot s (slots are numbered by chunk)
+                                    let src = off.partition_point(|&o| o <= s) - 1;
+                                    let o = &cross[src][e as usize];
+                                    f -= o.f;
+                                    t += rad[i] * o.q;
+                                    if want_stats {
+                                        add10(&mut ps[l], &cstat[src][e as usize]);
+                                    }
                                 }
                             }
+                            fo[l] = f;
+                            to[l] = t;
                         }
-                        fo[l] = f;
-                        to[l] = t;
+                        if kick > 0.0 {
+                            // the arithmetic of nve_final
+                            vo[l] += fo[l] * (kick * im[i]);
+                            wo[l] += to[l] * (kick * ii[i]);
+                        }
                     }
                 });
         }

@@ -183,6 +183,7 @@ impl Domain for PrCell {
     const NAME: &'static str = "triclinic cell (Parrinello-Rahman, imposed stress)";
     const NEEDS_VIRIAL: bool = true;
     const STREAMING: bool = true;
+    const PLAIN_NVE: bool = false;
 
     fn periodic(&self) -> [bool; 3] {
         [true; 3]

@@ -187,9 +187,8 @@ fn elastic_energy<D: crate::domain::Domain>(
 ) -> f64 {
     let mut u = 0.0;
     let pair_i = e.nl.pair_i();
-    for k in 0..e.nl.len() {
-        let i = pair_i[k] as usize;
-        let j = e.nl.pair_j[k] as usize;
+    for (&i, &j) in pair_i.iter().zip(&e.nl.pair_j) {
+        let (i, j) = (i as usize, j as usize);
         let d = crate::domain::Domain::delta(&e.domain, &e.p.x[i], &e.p.x[j]).norm();
         let delta = e.p.radius[i] + e.p.radius[j] - d;
         if delta > 0.0 {
@@ -573,10 +572,10 @@ fn cell_flip_changes_no_contact_force() {
             a.p.force[i]
         })
         .collect();
-    for k in 0..b.p.len() {
+    for (k, fk) in fa.iter().enumerate() {
         let i = b.p.id.iter().position(|&q| q as usize == k).unwrap();
-        let d = (b.p.force[i] - fa[k]).norm();
-        assert!(d <= 1e-9 * fa[k].norm().max(1e-6), "particle {k}: {d:e}");
+        let d = (b.p.force[i] - fk).norm();
+        assert!(d <= 1e-9 * fk.norm().max(1e-6), "particle {k}: {d:e}");
     }
 }
 
