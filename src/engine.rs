@@ -15,7 +15,7 @@ use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::history::{Cursor, HistList};
-use crate::neighbor::{image_shifts, widen, NeighborList, CHUNK};
+use crate::neighbor::{chunk_size, image_shifts, widen, NeighborList};
 use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
@@ -194,7 +194,7 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// contact point to the centre), row-major, then the power P_i = sum_j f_ij . v_ij / 2
     /// (+ wall contacts in full; negative when dissipating).
     pub pstats: Vec<[f64; 10]>,
-    /// Forces of the cross pairs in contact (see [`crate::neighbor::CHUNK`]) at the last
+    /// Forces of the cross pairs in contact (see [`crate::neighbor::chunk_size`]) at the last
     /// evaluation, compact per chunk; `cross_idx[slot]` is the entry of a cross slot in its
     /// chunk's list, or u32::MAX when the pair is open.
     pub(crate) cross: Vec<Vec<PairOut>>,
@@ -346,13 +346,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// each pair's periodic image stays fixed between builds); the contact histories follow
     /// their particles' ids into the new list.
     pub fn rebuild(&mut self) {
+        let ch = chunk_size(self.p.len());
         self.wrap_all();
         let (pairs, walls) = self.carried_histories();
         let _perm = self.nl.build(&mut self.p, &self.domain);
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
         let n = self.p.len();
-        let nchunks = n.div_ceil(CHUNK);
+        let nchunks = n.div_ceil(ch);
         self.cross.resize_with(nchunks, Vec::new);
         self.cross_stats.resize_with(nchunks, Vec::new);
         self.cross_idx.clear();
@@ -402,6 +403,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// listed, walls (id, wall, h).
     #[allow(clippy::type_complexity)]
     pub fn carried_histories(&self) -> (Vec<(u32, u32, T::History)>, Vec<(u32, u8, T::History)>) {
+        let ch = chunk_size(self.p.len());
         let mut pairs = Vec::new();
         let mut walls = Vec::new();
         if !T::FRICTIONAL || !self.nl.valid {
@@ -410,7 +412,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let nl = &self.nl;
         let n = self.p.len();
         for (c, list) in self.hist.iter().enumerate() {
-            let i0 = c * CHUNK;
+            let i0 = c * ch;
             if i0 >= n {
                 break;
             }
@@ -426,7 +428,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         for (c, list) in self.whist.iter().enumerate() {
             for (&key, &h) in list.keys.iter().zip(&list.vals) {
-                let i = c * CHUNK + key as usize / MAX_WALLS;
+                let i = c * ch + key as usize / MAX_WALLS;
                 if i < n {
                     walls.push((self.p.id[i], (key as usize % MAX_WALLS) as u8, h));
                 }
@@ -442,8 +444,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         pairs: &[(u32, u32, T::History)],
         walls: &[(u32, u8, T::History)],
     ) {
+        let ch = chunk_size(self.p.len());
         let n = self.p.len();
-        let nchunks = n.div_ceil(CHUNK);
+        let nchunks = n.div_ceil(ch);
         let nl = &self.nl;
         let mut inv = vec![0usize; n];
         for (i, &id) in self.p.id.iter().enumerate() {
@@ -469,7 +472,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .collect();
         we.sort_unstable_by_key(|e| e.0);
         let wb: Vec<u64> = (0..=nchunks)
-            .map(|c| ((c * CHUNK).min(n) * MAX_WALLS) as u64)
+            .map(|c| ((c * ch).min(n) * MAX_WALLS) as u64)
             .collect();
         self.whist = crate::history::distribute(&we, &wb);
         self.hist_next.resize_with(nchunks, HistList::default);
@@ -581,6 +584,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// recomputed from the positions, the velocities the evaluation used and the stored
     /// histories (without advancing them), so no per-pair force needs to be kept between steps.
     pub fn contact_list(&self) -> Vec<(usize, usize, V3, V3)> {
+        let ch = chunk_size(self.p.len());
         let n = self.p.len();
         let p = &self.p;
         let kin_ok = self.kin.len() == n;
@@ -613,7 +617,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 if D::STREAMING {
                     vrel += self.domain.streaming_velocity(&d);
                 }
-                let c = i / CHUNK;
+                let c = i / ch;
                 let mut h = match self.hist.get(c) {
                     Some(l) => l.get((k as u64 - bases[c]) as u32),
                     None => T::History::default(),
@@ -628,18 +632,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Packed per-step records: (x, R) and the velocities predicted to the end of the step,
     /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m.
     fn pack(&mut self) {
+        let ch = chunk_size(self.p.len());
         let n = self.p.len();
         let hdt = 0.5 * self.dt;
         let p = &self.p;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
         self.xr
-            .par_chunks_mut(CHUNK)
-            .zip(self.kin.par_chunks_mut(CHUNK))
+            .par_chunks_mut(ch)
+            .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .for_each(|(c, (a, b))| {
                 for l in 0..a.len() {
-                    let i = c * CHUNK + l;
+                    let i = c * ch + l;
                     let x = p.x[i];
                     a[l] = [x.x, x.y, x.z, p.radius[i]];
                     let v = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
@@ -652,6 +657,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// `nve_initial` and `check_and_pack` in one pass (same arithmetic, same bits): at large N
     /// the step is bound by memory traffic, and this reads each particle once.
     fn kick_drift_pack(&mut self) -> bool {
+        let ch = chunk_size(self.p.len());
         let n = self.p.len();
         if self.nl.x_build.len() != n {
             crate::domain::nve_initial(&mut self.p, self.dt);
@@ -666,16 +672,16 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let p = &mut self.p;
         let (f, t) = (&p.force, &p.torque);
         let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
-        p.x.par_chunks_mut(CHUNK)
-            .zip(p.v.par_chunks_mut(CHUNK))
-            .zip(p.omega.par_chunks_mut(CHUNK))
-            .zip(self.xr.par_chunks_mut(CHUNK))
-            .zip(self.kin.par_chunks_mut(CHUNK))
+        p.x.par_chunks_mut(ch)
+            .zip(p.v.par_chunks_mut(ch))
+            .zip(p.omega.par_chunks_mut(ch))
+            .zip(self.xr.par_chunks_mut(ch))
+            .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .map(|(c, ((((x, v), w), a), b))| {
                 let mut moved = false;
                 for l in 0..x.len() {
-                    let i = c * CHUNK + l;
+                    let i = c * ch + l;
                     let vn = v[l] + f[i] * (h * im[i]);
                     v[l] = vn;
                     x[l] += vn * dt;
@@ -695,6 +701,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Pack the step records; true if some particle moved more than half the skin since the
     /// last build (the list must be rebuilt).
     fn check_and_pack(&mut self) -> bool {
+        let ch = chunk_size(self.p.len());
         let n = self.p.len();
         if self.nl.x_build.len() != n {
             return true;
@@ -709,13 +716,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
         let x = &p.x;
         self.xr
-            .par_chunks_mut(CHUNK)
-            .zip(self.kin.par_chunks_mut(CHUNK))
+            .par_chunks_mut(ch)
+            .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .map(|(c, (a, b))| {
                 let mut moved = false;
                 for l in 0..a.len() {
-                    let i = c * CHUNK + l;
+                    let i = c * ch + l;
                     let xi = x[i];
                     // positions are not wrapped between builds: the plain difference is the
                     // displacement
@@ -851,12 +858,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     }
 
     fn evaluate_with<const STATS: bool, const VIR: bool>(&mut self, hist_dt: f64, kick: f64) {
+        let ch = chunk_size(self.p.len());
         let tstart = Instant::now();
         let dt = hist_dt;
         let want_vir = VIR;
         let want_stats = STATS;
         let n = self.p.len();
-        let nchunks = n.div_ceil(CHUNK);
+        let nchunks = n.div_ceil(ch);
         // lists exist from the first build on; keep them sized to the chunks
         self.hist.resize_with(nchunks, HistList::default);
         self.hist_next.resize_with(nchunks, HistList::default);
@@ -898,7 +906,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
         }
         let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
-            self.pstats.chunks_mut(CHUNK).collect()
+            self.pstats.chunks_mut(ch).collect()
         } else {
             (0..nchunks).map(|_| &mut [][..]).collect()
         };
@@ -918,12 +926,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
         let results: Vec<ChunkOut> = pieces
             .into_par_iter()
-            .zip(self.p.force.par_chunks_mut(CHUNK))
-            .zip(self.p.torque.par_chunks_mut(CHUNK))
+            .zip(self.p.force.par_chunks_mut(ch))
+            .zip(self.p.torque.par_chunks_mut(ch))
             .map(|((pc, fo), to)| {
                 let (c, hold, hnew, wold, wnew, cross, cstat, cidx, ps) = pc;
                 let mut out = ChunkOut::default();
-                let i0 = c * CHUNK;
+                let i0 = c * ch;
                 let i1 = i0 + fo.len();
                 let base = own_start[i0] as usize;
                 let mut xs = 0usize;
@@ -1116,21 +1124,21 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let cs = &nl.cross_start;
             let slot = &nl.cross_slot;
             let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
-                self.pstats.chunks_mut(CHUNK).collect()
+                self.pstats.chunks_mut(ch).collect()
             } else {
                 (0..nchunks).map(|_| &mut [][..]).collect()
             };
             let p = &mut self.p;
             let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
             p.force
-                .par_chunks_mut(CHUNK)
-                .zip(p.torque.par_chunks_mut(CHUNK))
-                .zip(p.v.par_chunks_mut(CHUNK))
-                .zip(p.omega.par_chunks_mut(CHUNK))
+                .par_chunks_mut(ch)
+                .zip(p.torque.par_chunks_mut(ch))
+                .zip(p.v.par_chunks_mut(ch))
+                .zip(p.omega.par_chunks_mut(ch))
                 .zip(ps_pieces.par_drain(..))
                 .enumerate()
                 .for_each(|(c, ((((fo, to), vo), wo), ps))| {
-                    let i0 = c * CHUNK;
+                    let i0 = c * ch;
                     for l in 0..fo.len() {
                         let i = i0 + l;
                         let (a, b) = (cs[i] as usize, cs[i + 1] as usize);
