@@ -19,13 +19,13 @@ const BUILD_CHUNK: usize = 512;
 /// the thread count): a pair whose two particles lie in the same chunk is summed in place by
 /// that chunk, a pair that crosses into a later chunk goes through a buffer (`cross_*`), and
 /// both orders depend only on the list, so any number of threads gives the same bits. Small
-/// systems get 512 (enough chunks to balance the threads), large ones up to 4096 (fewer
+/// systems get 256 (enough chunks to balance the threads), large ones up to 4096 (fewer
 /// cross-chunk pairs and a chunk's data still in L2: +12 % at 1e6 particles on one thread,
 /// 1.9x on two).
 pub fn chunk_size(n: usize) -> usize {
     let target = (n / 32).max(1);
     let p2 = 1usize << (usize::BITS - 1 - target.leading_zeros());
-    p2.clamp(512, 4096)
+    p2.clamp(256, 4096)
 }
 
 #[derive(Clone, Debug)]
