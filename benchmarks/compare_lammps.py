@@ -189,20 +189,9 @@ def reference_step0(st: State, gamma_n: float, conv: str, omega: bool = True) ->
             ft[slip] *= (lim[slip] / mag[slip])[:, None]
         return fn[:, None] * nv + ft, ft, slip
 
-    for i0 in range(0, n, 256):
-        i1 = min(n, i0 + 256)
-        dx = x[i0:i1, None, :] - x[None, :, :]
-        dx -= np.where(per, L * np.round(dx / L), 0.0)
-        rsq = np.einsum("ijk,ijk->ij", dx, dx)
-        rs = rad[i0:i1, None] + rad[None, :]
-        ii, jj = np.nonzero(rsq < rs * rs)
-        gi = ii + i0
-        keep = gi != jj
-        ii, jj, gi = ii[keep], jj[keep], gi[keep]
-        if len(ii) == 0:
-            continue
-        r = np.sqrt(rsq[ii, jj])
-        nv = dx[ii, jj] / r[:, None]
+    for gi, jj, dv, rsq in lp.contact_pairs(x, rad, L, per):
+        r = np.sqrt(rsq)
+        nv = dv / r[:, None]
         rsum = rad[gi] + rad[jj]
         delta = rsum - r
         meff = m[gi] * m[jj] / (m[gi] + m[jj])

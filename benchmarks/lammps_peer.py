@@ -708,6 +708,26 @@ def run(
             shutil.rmtree(wd, ignore_errors=True)
 
 
+def contact_pairs(x: np.ndarray, rad: np.ndarray, length: np.ndarray, periodic: np.ndarray,
+                  block: int = 256):
+    """Every ordered pair (i, j), i != j, of overlapping spheres by brute force (O(N^2) in
+    blocks of rows, minimum image along the periodic axes): yields (i, j, r_ij, |r_ij|^2) per
+    block. Both step-0 references (this module's and compare_lammps.py's) use it."""
+    n = len(x)
+    for i0 in range(0, n, block):
+        i1 = min(n, i0 + block)
+        dx = x[i0:i1, None, :] - x[None, :, :]
+        dx -= np.where(periodic, length * np.round(dx / length), 0.0)
+        rsq = np.einsum("ijk,ijk->ij", dx, dx)
+        rs = rad[i0:i1, None] + rad[None, :]
+        ii, jj = np.nonzero(rsq < rs * rs)
+        gi = ii + i0
+        keep = gi != jj
+        ii, jj, gi = ii[keep], jj[keep], gi[keep]
+        if len(ii):
+            yield gi, jj, dx[ii, jj], rsq[ii, jj]
+
+
 def hooke_step0_reference(
     state: dict[str, Any], params: dict[str, Any], scene: str = "periodic"
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -753,20 +773,8 @@ def hooke_step0_reference(
         fs[mag > mu * np.abs(fn)] = 0.0
         return fn[:, None] * nv + fs, fs
 
-    for i0 in range(0, n, 256):
-        i1 = min(n, i0 + 256)
-        dx = x[i0:i1, None, :] - x[None, :, :]
-        dx -= np.where(per, L * np.round(dx / L), 0.0)
-        rsq = np.sum(dx * dx, axis=2)
-        rs = rad[i0:i1, None] + rad[None, :]
-        ii, jj = np.nonzero(rsq < rs * rs)
-        ii_g = ii + i0
-        sel = ii_g != jj
-        ii, jj, ii_g = ii[sel], jj[sel], ii_g[sel]
-        if len(ii) == 0:
-            continue
-        dv = dx[ii, jj]
-        r = np.sqrt(rsq[ii, jj])
+    for ii_g, jj, dv, rsq in contact_pairs(x, rad, L, per):
+        r = np.sqrt(rsq)
         nv = dv / r[:, None]
         delta = rad[ii_g] + rad[jj] - r
         meff = m[ii_g] * m[jj] / (m[ii_g] + m[jj])
