@@ -3,13 +3,18 @@
 //! step (`W::ON`, `G::ON` are constants, so the branches compile away).
 //!
 //! One step (velocity Verlet, as LAMMPS `nve/sphere`):
-//! 1. half-kick and drift (the domain integrates: a deforming cell moves particles too);
-//! 2. wrap into the cell; rebuild the pair list if a particle moved more than half the skin;
-//! 3. pair forces into a per-pair buffer (parallel over fixed chunks of pairs), then each particle
-//!    gathers its pairs in list order plus walls and gravity (parallel over fixed chunks of
-//!    particles). Every floating-point sum has an order that does not depend on the thread count,
-//!    so 1 and 2 threads give the same bits;
-//! 4. second half-kick (and the cell's momentum update).
+//! 1. half-kick and drift (the domain integrates: a deforming cell moves particles too), in the
+//!    same pass as the displacement check and the packed records of the pair loop (plain NVE);
+//! 2. rebuild the pair list (wrapping positions into the cell, sorting particles along a Morton
+//!    curve) if a particle moved more than half the skin;
+//! 3. forces, parallel over fixed chunks of particles whose size depends on N only: a chunk
+//!    sums the pairs inside it in place and buffers the pairs reaching into later chunks, adds
+//!    walls and gravity; a second pass adds the buffered pairs to their second particles (and,
+//!    for plain NVE, applies the final half-kick). Every floating-point sum has an order fixed
+//!    by the list, so any number of threads gives the same bits;
+//! 4. second half-kick (and the cell's momentum update) where the domain has its own dynamics.
+//!
+//! Tangential histories are stored per closed contact (`crate::history`), not per listed pair.
 
 use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
