@@ -119,3 +119,11 @@ def test_arrow_batch_roundtrip_without_copy_semantics():
     s = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e5))
     assert s._sim.take_tables() == []  # a plain box has no samplers: nothing to pay for
     assert isinstance(pa.schema([]), pa.Schema)
+
+
+def test_damping_given_twice_is_refused():
+    # e_n equal to the default and xi_n: still two damping specifications
+    with pytest.raises(gf.ParameterError, match="e_n"):
+        gf.ContactLaw(e_n=0.82, xi_n=100.0).as_dict()
+    assert gf.ContactLaw().as_dict()["e_n"] == 0.82
+    assert "e_n" not in gf.ContactLaw(xi_n=100.0).as_dict()

@@ -15,6 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import pyarrow as pa
@@ -31,12 +32,14 @@ class ContactLaw:
 
     000 App. A (A1–A3), 002 §2.4 (2.17–2.19). ``form`` is 'hooke' (a = 0) or 'hertz' (a = 1/2).
     Damping: give ``e_n`` (restitution, the damping is derived per pair) or ``xi_n`` (rate, as
-    LAMMPS ``gamma_n``), not both. ``kt`` defaults to 2/7 kn, ``xi_t_ratio`` to 1/2. With
-    ``mu = 0`` the law carries no tangential history at all.
+    LAMMPS ``gamma_n``), not both; with neither, ``e_n = 0.82`` (000's value). ``kt`` defaults to
+    2/7 kn, ``xi_t_ratio`` to 1/2. With ``mu = 0`` the law carries no tangential history at all.
     """
 
+    DEFAULT_E_N: ClassVar[float] = 0.82
+
     kn: float = 1e6
-    e_n: float | None = 0.82
+    e_n: float | None = None
     mu: float = 0.5
     kt: float | None = None
     xi_n: float | None = None
@@ -48,11 +51,13 @@ class ContactLaw:
         if self.kt is not None:
             d["kt"] = self.kt
         if self.xi_n is not None:
-            if self.e_n is not None and self.e_n != ContactLaw.e_n:
-                raise ParameterError("invalid e_n/xi_n: give exactly one of e_n or xi_n")
+            if self.e_n is not None:
+                raise ParameterError(
+                    f"invalid e_n = {self.e_n!r} with xi_n = {self.xi_n!r}: allowed one of e_n "
+                    "(restitution) or xi_n (damping rate), not both")
             d["xi_n"] = self.xi_n
-        elif self.e_n is not None:
-            d["e_n"] = self.e_n
+        else:
+            d["e_n"] = self.DEFAULT_E_N if self.e_n is None else self.e_n
         return d
 
 
