@@ -127,3 +127,12 @@ def test_damping_given_twice_is_refused():
         gf.ContactLaw(e_n=0.82, xi_n=100.0).as_dict()
     assert gf.ContactLaw().as_dict()["e_n"] == 0.82
     assert "e_n" not in gf.ContactLaw(xi_n=100.0).as_dict()
+
+
+def test_contact_time_without_a_simulation(gas, make_sim):
+    box, x, d, v = gas
+    law = gf.ContactLaw(kn=1e5, e_n=0.7, mu=0.5)
+    s = make_sim(box, x, d, v, law=law)
+    assert gf.simulation.contact_time(law, d) == pytest.approx(s.contact_time, rel=1e-12)
+    with pytest.raises(gf.ParameterError, match="xi_n"):
+        gf.simulation.contact_time(gf.ContactLaw(kn=1.0, xi_n=1e3), d)  # over-damped

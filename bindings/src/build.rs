@@ -18,6 +18,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(insert_spheres, m)?)?;
     m.add_function(wrap_pyfunction!(diameters_for_volume, m)?)?;
     m.add_function(wrap_pyfunction!(hertz_zeta, m)?)?;
+    m.add_function(wrap_pyfunction!(contact_time, m)?)?;
     m.add_function(wrap_pyfunction!(cell_sim, m)?)?;
     Ok(())
 }
@@ -275,6 +276,16 @@ fn hertz_zeta(e_n: f64) -> PyResult<f64> {
         return Err(param_err("e_n", e_n, "0 < e_n <= 1"));
     }
     Ok(<Hertz as Form>::zeta(e_n))
+}
+
+/// Contact duration t_c of the linear law (as dict) for a pair of effective mass `m_eff`, the
+/// time the default dt is derived from; an over-damped law raises ParameterError.
+#[pyfunction]
+fn contact_time(law: &Bound<'_, PyDict>, m_eff: f64) -> PyResult<f64> {
+    let p = parse_law(law, "")?;
+    p.validate("").py_err()?;
+    granflow::error::check_positive("m_eff", m_eff).py_err()?;
+    p.contact_time(m_eff).py_err()
 }
 
 fn cell_engine<F: Form, T: Friction>(

@@ -49,7 +49,7 @@ import pyarrow as pa
 
 from granflow.errors import ParameterError
 from granflow.scenes import check_keys, register
-from granflow.simulation import Box, ContactLaw, Simulation, Wall
+from granflow.simulation import Box, ContactLaw, Simulation, Wall, contact_time
 from granflow.sizes import SizeDist, discrete
 
 RCP = 0.64
@@ -189,9 +189,7 @@ class Channel:
         prep_law = _law(min(self.kn, self.prep_kn), 0.3, 0.0, None, self.xi_t_ratio, "hooke")
         box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
         walls = [Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0), Wall(1, 0.0, 1.0)]
-        probe = Simulation(x, d, box, prep_law, walls=walls, gravity=(0.0, -1.0, 0.0),
-                           threads=self.threads, density=self.density)
-        dt = probe.contact_time / 20
+        dt = contact_time(prep_law, d, self.density) / 20
         sim = Simulation(x, d, box, prep_law, walls=walls, gravity=(0.0, -1.0, 0.0), dt=dt,
                          threads=self.threads, density=self.density, skin=self.skin)
         m = sim._sim.masses()
@@ -235,10 +233,9 @@ class Channel:
             g = (0.0, -1.0, 0.0)
             walls_now = walls
             rel_box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
-            probe = Simulation(x, d, rel_box, stiff, walls=walls_now, gravity=g,
-                               threads=self.threads, density=self.density)
             stiff_sim = Simulation(x, d, rel_box, stiff, walls=walls_now, gravity=g,
-                                   dt=probe.contact_time / 20, threads=self.threads,
+                                   dt=contact_time(stiff, d, self.density) / 20,
+                                   threads=self.threads,
                                    density=self.density, skin=self.skin)
             for _ in range(10):
                 stiff_sim.run(100, progress=False)

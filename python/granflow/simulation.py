@@ -363,6 +363,16 @@ def to_table(batch: _core.ArrowBatch) -> pa.Table:
     return pa.Table.from_batches([rb])
 
 
+def contact_time(law: ContactLaw, diameters: np.ndarray, density: float = 1.0) -> float:
+    """Contact duration t_c of the stiffest, lightest pair (linear law, 000 App. A) for these
+    particles, without building a simulation: what ``Simulation.contact_time`` reports."""
+    d = np.asarray(diameters, dtype=float)
+    if d.size == 0:
+        raise ParameterError("invalid diameters = []: allowed at least one particle")
+    m_min = density * np.pi / 6.0 * float(d.min()) ** 3
+    return float(_core.contact_time(law.as_dict(), 0.5 * m_min))
+
+
 def random_packing(
     sizes: SizeDist,
     box: Box,
