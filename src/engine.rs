@@ -1001,7 +1001,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         // the half-step velocity (plain velocity Verlet: O(dt) error in e_n).
                         let vj = V3::new(kj[0], kj[1], kj[2]);
                         let wj = V3::new(kj[4], kj[5], kj[6]);
-                        let mut vrel = vi - vj - (arm * (ri * wi + rj * wj)).cross(&nrm);
+                        // without friction only v_n matters, and spin adds nothing to it
+                        // ((w x n) . n = 0): the rotational part and the torques are skipped
+                        let mut vrel = vi - vj;
+                        if T::FRICTIONAL {
+                            vrel -= (arm * (ri * wi + rj * wj)).cross(&nrm);
+                        }
                         if D::STREAMING {
                             vrel += dom.streaming_velocity(&d);
                         }
@@ -1014,16 +1019,24 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         if T::FRICTIONAL {
                             hnew.push(kk, h);
                         }
-                        let qv = -arm * nrm.cross(&pf.ft);
+                        let qv = if T::FRICTIONAL {
+                            -arm * nrm.cross(&pf.ft)
+                        } else {
+                            V3::zeros()
+                        };
                         fsum += pf.f;
-                        tsum += ri * qv;
+                        if T::FRICTIONAL {
+                            tsum += ri * qv;
+                        }
                         if is_cross {
                             cidx[xs] = cross.len() as u32;
                             cross.push(PairOut { f: pf.f, q: qv });
                         } else {
                             let lj = j - i0;
                             fo[lj] -= pf.f;
-                            to[lj] += rj * qv;
+                            if T::FRICTIONAL {
+                                to[lj] += rj * qv;
+                            }
                         }
                         let ov = delta * inv_rs;
                         if ov > out.max_ov {
@@ -1061,7 +1074,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                             let delta = ri - gap;
                             // contact point on the plane: lever arm = gap; predicted
                             // end-of-step velocities, as for pairs
-                            let vrel = vi - (gap * wi).cross(&nrm);
+                            let vrel = if T::FRICTIONAL {
+                                vi - (gap * wi).cross(&nrm)
+                            } else {
+                                vi
+                            };
                             let key = (li * MAX_WALLS + w) as u32;
                             let mut h = if T::FRICTIONAL {
                                 wc.take(key)
@@ -1073,7 +1090,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                                 wnew.push(key, h);
                             }
                             fsum += pf.f;
-                            tsum -= gap * nrm.cross(&pf.ft);
+                            if T::FRICTIONAL {
+                                tsum -= gap * nrm.cross(&pf.ft);
+                            }
                             out.wall_force[w] -= pf.f;
                             if want_stats {
                                 // branch vector from the contact point on the wall to the centre
