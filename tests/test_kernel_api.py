@@ -126,6 +126,7 @@ def test_damping_given_twice_is_refused():
     with pytest.raises(gf.ParameterError, match="e_n"):
         gf.ContactLaw(e_n=0.82, xi_n=100.0).as_dict()
     assert gf.ContactLaw().as_dict()["e_n"] == 0.82
+    assert gf.ContactLaw().e_n == 0.82
     assert "e_n" not in gf.ContactLaw(xi_n=100.0).as_dict()
 
 

@@ -46,6 +46,11 @@ class ContactLaw:
     xi_t_ratio: float = 0.5
     form: str = "hooke"
 
+    def __post_init__(self) -> None:
+        # neither damping given: 000's restitution, recorded so that parameters() shows it
+        if self.e_n is None and self.xi_n is None:
+            object.__setattr__(self, "e_n", self.DEFAULT_E_N)
+
     def as_dict(self) -> dict[str, float]:
         d: dict[str, float] = {"kn": self.kn, "mu": self.mu, "xi_t_ratio": self.xi_t_ratio}
         if self.kt is not None:
