@@ -59,8 +59,9 @@ pub trait Simulation: Send + Sync {
     /// Restore a state written by `save_checkpoint` from a simulation built with the same
     /// parameters.
     fn load_checkpoint(&mut self, r: &crate::checkpoint::Reader) -> Result<()>;
-    /// Total elastic energy stored in the contacts (linear law: kn delta^2/2; Hertz:
-    /// 2/5 kn delta^(5/2)/sqrt(d)); used for energy balances.
+    /// Total elastic energy stored in the contacts: normal springs (linear law: kn delta^2/2;
+    /// Hertz: 2/5 kn delta^(5/2)/sqrt(d)) and tangential springs (s kt |u|^2/2); used for
+    /// energy balances.
     fn elastic_energy(&self) -> f64;
 }
 
@@ -174,7 +175,57 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 }
             }
         }
-        u
+        u + self.tangential_energy()
+    }
+
+    /// Energy in the tangential springs of the closed contacts, s k_t |u|^2 / 2 (A2; s the
+    /// form's spring factor), pairs and walls.
+    pub fn tangential_energy(&self) -> f64 {
+        if !T::FRICTIONAL {
+            return 0.0;
+        }
+        let nl = &self.nl;
+        let n = self.p.len();
+        let ch = crate::neighbor::chunk_size(n);
+        let kt = self.law.params.kt;
+        let u2 = |h: &T::History| {
+            let a = T::to_array(h);
+            a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+        };
+        let mut e = 0.0;
+        for (c, list) in self.hist.iter().enumerate() {
+            let i0 = c * ch;
+            if i0 >= n || !nl.valid {
+                break;
+            }
+            let base = nl.own_start[i0] as usize;
+            let mut i = i0;
+            for (&kk, h) in list.keys.iter().zip(&list.vals) {
+                let k = base + kk as usize;
+                while nl.own_start[i + 1] as usize <= k {
+                    i += 1;
+                }
+                let j = nl.pair_j[k] as usize;
+                let rs = self.p.radius[i] + self.p.radius[j];
+                let delta = rs - self.domain.delta(&self.p.x[i], &self.p.x[j]).norm();
+                let (sf, _) = F::factors(delta.max(0.0), rs, false);
+                e += 0.5 * sf * kt * u2(h);
+            }
+        }
+        if let Some(wl) = self.walls.law() {
+            let ktw = wl.params.kt;
+            for (c, list) in self.whist.iter().enumerate() {
+                for (&key, h) in list.keys.iter().zip(&list.vals) {
+                    let i = c * ch + key as usize / crate::engine::MAX_WALLS;
+                    let pl = self.walls.planes()[key as usize % crate::engine::MAX_WALLS];
+                    let ri = self.p.radius[i];
+                    let delta = ri - pl.sign * (self.p.x[i][pl.axis] - pl.pos);
+                    let (sf, _) = F::factors(delta.max(0.0), 2.0 * ri, false);
+                    e += 0.5 * sf * ktw * u2(h);
+                }
+            }
+        }
+        e
     }
 }
 
