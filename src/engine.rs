@@ -37,6 +37,24 @@ pub struct Plane {
     pub sign: f64,
 }
 
+impl Plane {
+    /// The two side walls of a channel across `axis`: x = lo facing +, x = hi facing -.
+    pub fn pair_across(axis: usize, lo: f64, hi: f64) -> Vec<Plane> {
+        vec![
+            Plane {
+                axis,
+                pos: lo,
+                sign: 1.0,
+            },
+            Plane {
+                axis,
+                pos: hi,
+                sign: -1.0,
+            },
+        ]
+    }
+}
+
 /// Walls as a component. `NoWalls` compiles to nothing.
 pub trait Walls<F: Form, T: Friction>: Clone + Send + Sync + 'static {
     const ON: bool;
@@ -171,10 +189,10 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Tangential histories of the closed pair contacts, one sorted list per force-loop chunk
     /// (`crate::history`), and the lists the next evaluation writes.
     pub hist: Vec<HistList<T::History>>,
-    hist_next: Vec<HistList<T::History>>,
+    pub(crate) hist_next: Vec<HistList<T::History>>,
     /// The same for wall contacts (key: particle within the chunk x MAX_WALLS + wall).
     pub whist: Vec<HistList<T::History>>,
-    whist_next: Vec<HistList<T::History>>,
+    pub(crate) whist_next: Vec<HistList<T::History>>,
     pub dt: f64,
     pub step: u64,
     pub time: f64,
@@ -311,7 +329,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             energy_ref: None,
             forces_valid: false,
         };
-        e.wrap_all();
         e.rebuild();
         e.compute_forces_setup();
         if e.diag.max_overlap > e.guards.max_overlap {
@@ -351,19 +368,26 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// each pair's periodic image stays fixed between builds); the contact histories follow
     /// their particles' ids into the new list.
     pub fn rebuild(&mut self) {
-        let ch = chunk_size(self.p.len());
         self.wrap_all();
         let (pairs, walls) = self.carried_histories();
-        let _perm = self.nl.build(&mut self.p, &self.domain);
+        self.nl.build(&mut self.p, &self.domain);
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
-        let n = self.p.len();
-        let nchunks = n.div_ceil(ch);
+        self.trim();
+    }
+
+    /// Size the per-chunk and per-cross-slot buffers to the current list (after a build or a
+    /// restart; the force loop relies on it).
+    fn size_buffers(&mut self) {
+        let nchunks = self.p.len().div_ceil(chunk_size(self.p.len()));
+        self.hist.resize_with(nchunks, HistList::default);
+        self.hist_next.resize_with(nchunks, HistList::default);
+        self.whist.resize_with(nchunks, HistList::default);
+        self.whist_next.resize_with(nchunks, HistList::default);
         self.cross.resize_with(nchunks, Vec::new);
         self.cross_stats.resize_with(nchunks, Vec::new);
         self.cross_idx.clear();
         self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
-        self.trim();
     }
 
     /// Keep the per-contact buffers at about 1.25 times what they hold: pushes during a sweep
@@ -404,41 +428,51 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
     }
 
-    /// Every stored history with the ids of its particles: pairs (id_i, id_j, h) oriented as
-    /// listed, walls (id, wall, h).
-    #[allow(clippy::type_complexity)]
-    pub fn carried_histories(&self) -> (Vec<(u32, u32, T::History)>, Vec<(u32, u8, T::History)>) {
-        let ch = chunk_size(self.p.len());
-        let mut pairs = Vec::new();
-        let mut walls = Vec::new();
+    /// Visit every stored history: `pair(i, j, h)` for pair contacts (internal indices, as
+    /// listed), `wall(i, w, h)` for wall contacts. Nothing without friction or a list.
+    pub fn for_each_history(
+        &self,
+        mut pair: impl FnMut(usize, usize, &T::History),
+        mut wall: impl FnMut(usize, usize, &T::History),
+    ) {
         if !T::FRICTIONAL || !self.nl.valid {
-            return (pairs, walls);
+            return;
         }
         let nl = &self.nl;
         let n = self.p.len();
-        for (c, list) in self.hist.iter().enumerate() {
-            let i0 = c * ch;
-            if i0 >= n {
-                break;
-            }
-            let base = nl.own_start[i0] as usize;
-            let mut i = i0;
-            for (&kk, &h) in list.keys.iter().zip(&list.vals) {
+        let ch = chunk_size(n);
+        for (c, list) in self.hist.iter().enumerate().take(n.div_ceil(ch)) {
+            let base = nl.own_start[c * ch] as usize;
+            let mut i = c * ch;
+            for (&kk, h) in list.keys.iter().zip(&list.vals) {
                 let k = base + kk as usize;
                 while nl.own_start[i + 1] as usize <= k {
                     i += 1;
                 }
-                pairs.push((self.p.id[i], self.p.id[nl.pair_j[k] as usize], h));
+                pair(i, nl.pair_j[k] as usize, h);
             }
         }
         for (c, list) in self.whist.iter().enumerate() {
-            for (&key, &h) in list.keys.iter().zip(&list.vals) {
+            for (&key, h) in list.keys.iter().zip(&list.vals) {
                 let i = c * ch + key as usize / MAX_WALLS;
                 if i < n {
-                    walls.push((self.p.id[i], (key as usize % MAX_WALLS) as u8, h));
+                    wall(i, key as usize % MAX_WALLS, h);
                 }
             }
         }
+    }
+
+    /// Every stored history with the ids of its particles: pairs (id_i, id_j, h) oriented as
+    /// listed, walls (id, wall, h).
+    #[allow(clippy::type_complexity)]
+    pub fn carried_histories(&self) -> (Vec<(u32, u32, T::History)>, Vec<(u32, u8, T::History)>) {
+        let mut pairs = Vec::new();
+        let mut walls = Vec::new();
+        let id = &self.p.id;
+        self.for_each_history(
+            |i, j, h| pairs.push((id[i], id[j], *h)),
+            |i, w, h| walls.push((id[i], w as u8, *h)),
+        );
         (pairs, walls)
     }
 
@@ -480,15 +514,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .map(|c| ((c * ch).min(n) * MAX_WALLS) as u64)
             .collect();
         self.whist = crate::history::distribute(&we, &wb);
-        self.hist_next.resize_with(nchunks, HistList::default);
-        self.whist_next.resize_with(nchunks, HistList::default);
-    }
-
-    pub(crate) fn hist_next_ref(&self) -> &[HistList<T::History>] {
-        &self.hist_next
-    }
-    pub(crate) fn whist_next_ref(&self) -> &[HistList<T::History>] {
-        &self.whist_next
+        self.size_buffers();
     }
 
     /// Every stored pair history (for tests and diagnostics).
@@ -517,7 +543,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             // velocities are full-step here: the dashpot's prediction must add nothing
             self.p.force.iter_mut().for_each(|f| *f = V3::zeros());
             self.p.torque.iter_mut().for_each(|t| *t = V3::zeros());
-            self.wrap_all();
+            // positions are wrapped only by a rebuild: a wrap without one would break the
+            // pairs' fixed image codes
             if self.nl.needs_rebuild(&self.p, &self.domain) {
                 self.rebuild();
             }
@@ -545,7 +572,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.kick_drift_pack()
         } else {
             self.domain.integrate_initial(&mut self.p, dt);
-            self.check_and_pack()
+            self.pack()
         };
         self.domain.check(self.step)?;
         let t1 = Instant::now();
@@ -634,32 +661,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         out
     }
 
-    /// Packed per-step records: (x, R) and the velocities predicted to the end of the step,
-    /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m.
-    fn pack(&mut self) {
-        let ch = chunk_size(self.p.len());
-        let n = self.p.len();
-        let hdt = 0.5 * self.dt;
-        let p = &self.p;
-        self.xr.resize(n, [0.0; 4]);
-        self.kin.resize(n, [0.0; 8]);
-        self.xr
-            .par_chunks_mut(ch)
-            .zip(self.kin.par_chunks_mut(ch))
-            .enumerate()
-            .for_each(|(c, (a, b))| {
-                for l in 0..a.len() {
-                    let i = c * ch + l;
-                    let x = p.x[i];
-                    a[l] = [x.x, x.y, x.z, p.radius[i]];
-                    let v = p.v[i] + (hdt * p.inv_mass[i]) * p.force[i];
-                    let w = p.omega[i] + (hdt * p.inv_inertia[i]) * p.torque[i];
-                    b[l] = [v.x, v.y, v.z, p.inv_mass[i], w.x, w.y, w.z, 0.0];
-                }
-            });
-    }
-
-    /// `nve_initial` and `check_and_pack` in one pass (same arithmetic, same bits): at large N
+    /// `nve_initial` and `pack` in one pass (same arithmetic, same bits): at large N
     /// the step is bound by memory traffic, and this reads each particle once.
     fn kick_drift_pack(&mut self) -> bool {
         let ch = chunk_size(self.p.len());
@@ -693,34 +695,29 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     w[l] += t[i] * (h * ii[i]);
                     let xi = x[l];
                     moved |= (xi - widen(&xb[i])).norm_squared() > lim;
-                    a[l] = [xi.x, xi.y, xi.z, rad[i]];
-                    let vp = vn + (h * im[i]) * f[i];
-                    let wp = w[l] + (h * ii[i]) * t[i];
-                    b[l] = [vp.x, vp.y, vp.z, im[i], wp.x, wp.y, wp.z, 0.0];
+                    a[l] = xr_record(&xi, rad[i]);
+                    b[l] = kin_record(&vn, &w[l], &f[i], &t[i], im[i], ii[i], h);
                 }
                 moved
             })
             .reduce(|| false, |a, b| a || b)
     }
 
-    /// Pack the step records; true if some particle moved more than half the skin since the
-    /// last build (the list must be rebuilt).
-    fn check_and_pack(&mut self) -> bool {
-        let ch = chunk_size(self.p.len());
+    /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
+    /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m. Returns true if some particle
+    /// moved more than half the skin since the last build (the list must be rebuilt).
+    fn pack(&mut self) -> bool {
         let n = self.p.len();
-        if self.nl.x_build.len() != n {
-            return true;
-        }
+        let ch = chunk_size(n);
         let hdt = 0.5 * self.dt;
+        let built = self.nl.x_build.len() == n;
         let lim = self.nl.moved_limit2();
         let xb = &self.nl.x_build;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
         let p = &self.p;
-        let (v, om, f, t) = (&p.v, &p.omega, &p.force, &p.torque);
-        let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
-        let x = &p.x;
-        self.xr
+        let moved = self
+            .xr
             .par_chunks_mut(ch)
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
@@ -728,18 +725,25 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 let mut moved = false;
                 for l in 0..a.len() {
                     let i = c * ch + l;
-                    let xi = x[i];
+                    let xi = p.x[i];
                     // positions are not wrapped between builds: the plain difference is the
                     // displacement
-                    moved |= (xi - widen(&xb[i])).norm_squared() > lim;
-                    a[l] = [xi.x, xi.y, xi.z, rad[i]];
-                    let vp = v[i] + (hdt * im[i]) * f[i];
-                    let wp = om[i] + (hdt * ii[i]) * t[i];
-                    b[l] = [vp.x, vp.y, vp.z, im[i], wp.x, wp.y, wp.z, 0.0];
+                    moved |= built && (xi - widen(&xb[i])).norm_squared() > lim;
+                    a[l] = xr_record(&xi, p.radius[i]);
+                    b[l] = kin_record(
+                        &p.v[i],
+                        &p.omega[i],
+                        &p.force[i],
+                        &p.torque[i],
+                        p.inv_mass[i],
+                        p.inv_inertia[i],
+                        hdt,
+                    );
                 }
                 moved
             })
-            .reduce(|| false, |a, b| a || b)
+            .reduce(|| false, |a, b| a || b);
+        moved || !built
     }
 
     fn check_overlap(&self) -> Result<()> {
@@ -826,13 +830,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         Ok(())
     }
 
-    /// Evaluate all forces and torques for the current positions and velocities, advancing
-    /// the tangential histories by one step (the evaluation inside a time step).
-    pub fn compute_forces(&mut self) {
-        self.pack();
-        self.evaluate(self.dt, 0.0);
-    }
-
     /// Evaluate forces without advancing any tangential history: no time has passed (the first
     /// evaluation, or after the state was set from outside). As LAMMPS's setup, which skips
     /// the history update.
@@ -841,7 +838,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.evaluate(0.0, 0.0);
     }
 
-    /// Forces from the packed records (`pack` or `wrap_and_pack` must have run). `hist_dt`: the
+    /// Forces from the packed records (`pack` or `kick_drift_pack` must have run). `hist_dt`: the
     /// time over which the histories are advanced (dt in a step, 0 at set-up).
     ///
     /// Phase 1, parallel over fixed chunks of particles: each chunk sweeps its particles in
@@ -870,17 +867,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let want_stats = STATS;
         let n = self.p.len();
         let nchunks = n.div_ceil(ch);
-        // lists exist from the first build on; keep them sized to the chunks
-        self.hist.resize_with(nchunks, HistList::default);
-        self.hist_next.resize_with(nchunks, HistList::default);
-        self.whist.resize_with(nchunks, HistList::default);
-        self.whist_next.resize_with(nchunks, HistList::default);
-        self.cross.resize_with(nchunks, Vec::new);
-        self.cross_stats.resize_with(nchunks, Vec::new);
-        if self.cross_idx.len() != self.nl.n_cross() {
-            self.cross_idx.clear();
-            self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
-        }
+        // sized by every build and restart (size_buffers)
+        debug_assert_eq!(self.hist.len(), nchunks);
+        debug_assert_eq!(self.cross_idx.len(), self.nl.n_cross());
         if want_stats {
             self.pstats.clear();
             self.pstats.resize(n, [0.0; 10]);
@@ -910,11 +899,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 cidx_pieces.push(a);
             }
         }
-        let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
-            self.pstats.chunks_mut(ch).collect()
-        } else {
-            (0..nchunks).map(|_| &mut [][..]).collect()
-        };
+        let mut ps_pieces = stat_pieces(&mut self.pstats, want_stats, ch, nchunks);
         let pieces: Vec<_> = (0..nchunks)
             .zip(self.hist.iter())
             .zip(self.hist_next.iter_mut())
@@ -1147,11 +1132,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let off = &nl.cross_off;
             let cs = &nl.cross_start;
             let slot = &nl.cross_slot;
-            let mut ps_pieces: Vec<&mut [[f64; 10]]> = if want_stats {
-                self.pstats.chunks_mut(ch).collect()
-            } else {
-                (0..nchunks).map(|_| &mut [][..]).collect()
-            };
+            let mut ps_pieces = stat_pieces(&mut self.pstats, want_stats, ch, nchunks);
             let p = &mut self.p;
             let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
             p.force
@@ -1210,6 +1191,35 @@ struct ChunkOut {
     vir: M3,
     contacts: usize,
     wall_force: [V3; MAX_WALLS],
+}
+
+/// Each chunk's slice of the per-particle statistics (empty slices when not asked for).
+fn stat_pieces(
+    ps: &mut [[f64; 10]],
+    want: bool,
+    ch: usize,
+    nchunks: usize,
+) -> Vec<&mut [[f64; 10]]> {
+    if want {
+        ps.chunks_mut(ch).collect()
+    } else {
+        (0..nchunks).map(|_| &mut [][..]).collect()
+    }
+}
+
+/// Packed position record of the pair loop: (x, R).
+#[inline(always)]
+fn xr_record(x: &V3, r: f64) -> [f64; 4] {
+    [x.x, x.y, x.z, r]
+}
+
+/// Packed velocity record of the pair loop: v and w predicted to the end of the step
+/// (v + h f/m, w + h t/I, h = dt/2) and 1/m.
+#[inline(always)]
+fn kin_record(v: &V3, w: &V3, f: &V3, t: &V3, im: f64, ii: f64, h: f64) -> [f64; 8] {
+    let vp = v + (h * im) * f;
+    let wp = w + (h * ii) * t;
+    [vp.x, vp.y, vp.z, im, wp.x, wp.y, wp.z, 0.0]
 }
 
 #[inline(always)]

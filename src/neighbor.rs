@@ -134,9 +134,9 @@ impl NeighborList {
         h * h
     }
 
-    /// Rebuild: spatially sort particles (returns the permutation applied, new[k] = old[perm[k]])
-    /// and rebuild the pair list. The engine carries the contact histories over by particle id.
-    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) -> Vec<usize> {
+    /// Rebuild: spatially sort particles (along a Morton curve of cells) and rebuild the pair
+    /// list. The engine carries the contact histories over by particle id.
+    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) {
         let n = p.len();
         // 2. cells in fractional coordinates
         let rmax = p.max_radius();
@@ -283,15 +283,8 @@ impl NeighborList {
         self.xb_eps = 1.8 * xmax * f64::from(f32::EPSILON);
         self.builds += 1;
         self.valid = true;
-        if identity {
-            Vec::new()
-        } else {
-            perm
-        }
     }
-}
 
-impl NeighborList {
     /// Image code of every pair from the positions at the build (`x_build` on a restart).
     pub fn set_images<D: Domain>(&mut self, x: &[V3], dom: &D, hinv: &M3) {
         let n = x.len();
@@ -388,14 +381,4 @@ pub fn image_shifts(h: &M3) -> [V3; 27] {
         *v = h * n;
     }
     t
-}
-
-/// Key of an unordered pair of ids, and whether (a, b) is the reverse of the key's order.
-#[inline]
-pub fn pair_key(a: u32, b: u32) -> (u64, bool) {
-    if a < b {
-        (((a as u64) << 32) | b as u64, false)
-    } else {
-        (((b as u64) << 32) | a as u64, true)
-    }
 }

@@ -70,6 +70,14 @@ fn vec_bytes<T>(v: &Vec<T>) -> usize {
 }
 
 /// Bytes held by the particle arrays.
+/// Bytes held by the per-chunk history lists and their next-step copies.
+fn list_bytes<H: Copy + Default>(
+    a: &[crate::history::HistList<H>],
+    b: &[crate::history::HistList<H>],
+) -> usize {
+    a.iter().chain(b).map(|l| l.bytes()).sum()
+}
+
 pub fn particle_bytes(p: &Particles) -> usize {
     vec_bytes(&p.x)
         + vec_bytes(&p.v)
@@ -130,24 +138,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 "packed step records".to_string(),
                 vec_bytes(&self.xr) + vec_bytes(&self.kin),
             ),
-            ("tangential history".to_string(), self.hist_bytes()),
-            ("wall history".to_string(), self.whist_bytes()),
+            (
+                "tangential history".to_string(),
+                list_bytes(&self.hist, &self.hist_next),
+            ),
+            (
+                "wall history".to_string(),
+                list_bytes(&self.whist, &self.whist_next),
+            ),
         ]
-    }
-
-    fn hist_bytes(&self) -> usize {
-        self.hist
-            .iter()
-            .chain(self.hist_next_ref())
-            .map(|l| l.bytes())
-            .sum()
-    }
-    fn whist_bytes(&self) -> usize {
-        self.whist
-            .iter()
-            .chain(self.whist_next_ref())
-            .map(|l| l.bytes())
-            .sum()
     }
 
     pub fn elastic_energy_sum(&self) -> f64 {
@@ -181,51 +180,32 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Energy in the tangential springs of the closed contacts, s k_t |u|^2 / 2 (A2; s the
     /// form's spring factor), pairs and walls.
     pub fn tangential_energy(&self) -> f64 {
-        if !T::FRICTIONAL {
-            return 0.0;
-        }
-        let nl = &self.nl;
-        let n = self.p.len();
-        let ch = crate::neighbor::chunk_size(n);
-        let kt = self.law.params.kt;
+        let p = &self.p;
         let u2 = |h: &T::History| {
             let a = T::to_array(h);
             a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
         };
         let mut e = 0.0;
-        for (c, list) in self.hist.iter().enumerate() {
-            let i0 = c * ch;
-            if i0 >= n || !nl.valid {
-                break;
-            }
-            let base = nl.own_start[i0] as usize;
-            let mut i = i0;
-            for (&kk, h) in list.keys.iter().zip(&list.vals) {
-                let k = base + kk as usize;
-                while nl.own_start[i + 1] as usize <= k {
-                    i += 1;
-                }
-                let j = nl.pair_j[k] as usize;
-                let rs = self.p.radius[i] + self.p.radius[j];
-                let delta = rs - self.domain.delta(&self.p.x[i], &self.p.x[j]).norm();
+        let kt = self.law.params.kt;
+        let ktw = self.walls.law().map_or(0.0, |wl| wl.params.kt);
+        let planes = self.walls.planes();
+        let mut wall_e = 0.0;
+        self.for_each_history(
+            |i, j, h| {
+                let rs = p.radius[i] + p.radius[j];
+                let delta = rs - self.domain.delta(&p.x[i], &p.x[j]).norm();
                 let (sf, _) = F::factors(delta.max(0.0), rs, false);
                 e += 0.5 * sf * kt * u2(h);
-            }
-        }
-        if let Some(wl) = self.walls.law() {
-            let ktw = wl.params.kt;
-            for (c, list) in self.whist.iter().enumerate() {
-                for (&key, h) in list.keys.iter().zip(&list.vals) {
-                    let i = c * ch + key as usize / crate::engine::MAX_WALLS;
-                    let pl = self.walls.planes()[key as usize % crate::engine::MAX_WALLS];
-                    let ri = self.p.radius[i];
-                    let delta = ri - pl.sign * (self.p.x[i][pl.axis] - pl.pos);
-                    let (sf, _) = F::factors(delta.max(0.0), 2.0 * ri, false);
-                    e += 0.5 * sf * ktw * u2(h);
-                }
-            }
-        }
-        e
+            },
+            |i, w, h| {
+                let pl = planes[w];
+                let ri = p.radius[i];
+                let delta = ri - pl.sign * (p.x[i][pl.axis] - pl.pos);
+                let (sf, _) = F::factors(delta.max(0.0), 2.0 * ri, false);
+                wall_e += 0.5 * sf * ktw * u2(h);
+            },
+        );
+        e + wall_e
     }
 }
 
@@ -474,7 +454,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             return Err(bad("contact history refers to unknown particles".into()));
         }
         self.set_histories(&pairs, &walls);
-        self.cross_idx = vec![u32::MAX; self.nl.n_cross()];
         self.domain.load_state(&r.f64s("domain")?)?;
         // the pairs' periodic images follow from the positions at the last build
         let hinv = self
