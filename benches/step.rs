@@ -112,18 +112,7 @@ fn main() {
     pool.install(|| {
         if kind == 1 {
             let bx = OrthoBox::new(V3::zeros(), l, [false, true, true]).unwrap();
-            let planes = vec![
-                Plane {
-                    axis: 0,
-                    pos: 0.0,
-                    sign: 1.0,
-                },
-                Plane {
-                    axis: 0,
-                    pos: l.x,
-                    sign: -1.0,
-                },
-            ];
+            let planes = Plane::pair_across(0, 0.0, l.x);
             let g = Gravity(V3::new(0.0, -1.0, 0.0));
             if mu > 0.0 {
                 let w = PlaneWalls::<Hooke, Coulomb>::new(planes, law).unwrap();

@@ -471,22 +471,7 @@ fn per_particle_stress_sums_to_the_virial_and_walls_count() {
     }
     let law = LawParams::new(1e5, 0.8, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
-    let walls = PlaneWalls::<Hooke, Coulomb>::new(
-        vec![
-            Plane {
-                axis: 0,
-                pos: 0.0,
-                sign: 1.0,
-            },
-            Plane {
-                axis: 0,
-                pos: l,
-                sign: -1.0,
-            },
-        ],
-        law,
-    )
-    .unwrap();
+    let walls = PlaneWalls::<Hooke, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
     let mut s = Engine::new(
         p,
         law,
