@@ -305,7 +305,8 @@ class EnergyBalance:
     """Energy ledger of a cell run (see :func:`energy_balance`); energies in kn a^2.
 
     ``work`` = ``work_p`` + ``work_tau``: the imposed stress's work; ``delta_energy`` = change of
-    E = kinetic (peculiar translational + rotational) + normal elastic + cell kinetic
+    E = kinetic (peculiar translational + rotational) + elastic (normal and tangential springs) +
+    cell kinetic
     (``delta_kinetic``, ``delta_elastic``, ``delta_cell_kinetic``); ``dissipation`` = W - dE
     (inferred); ``contact_work`` = time integral of the contact power sum_i P_i (trapezoid);
     ``skew_work``, ``mtk_work``: the two small terms of the equations of motion that are neither
@@ -366,9 +367,8 @@ def energy_balance(cell: ShearCell, steps: int, every: int = 1) -> EnergyBalance
     friction term of 2.10b without its counterpart in 2.10d. Both are reported.
 
     ``every``: sampling interval in steps (1: every step; the contact power oscillates at the
-    contact frequency, so the trapezoid needs a few samples per t_c). The kernel's U is the
-    normal-spring energy only (the tangential spring energy is not exposed), so the measured
-    dissipation includes the change of the tangential elastic energy.
+    contact frequency, so the trapezoid needs a few samples per t_c). U is the kernel's elastic
+    energy, normal and tangential springs.
     """
     core = cell.sim
     m = np.asarray(core.masses(), dtype=float)
@@ -412,7 +412,7 @@ def energy_balance(cell: ShearCell, steps: int, every: int = 1) -> EnergyBalance
     dk, de, dkg = a[-1, 1] - a[0, 1], a[-1, 2] - a[0, 2], a[-1, 3] - a[0, 3]
     work = work_p + work_tau
     d_e = dk + de + dkg
-    # contact dissipation: work of the contact forces not stored as (normal) elastic energy
+    # contact dissipation: work of the contact forces not stored as elastic energy
     dis_meas = -contact - de
     res = work + skew - mtk - d_e - dis_meas
     return EnergyBalance(
