@@ -195,3 +195,18 @@ def test_plots_se_vs_time_and_work_precision(tmp_path):
     for p in (p1, p2):
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
+
+
+def test_time_to_reach_agrees_with_the_measured_error():
+    # correlations that short prefixes miss (a slow component): the estimate must not promise
+    # the target sooner than the full-length SE already implies
+    rng = np.random.default_rng(11)
+    n, dt = 2**14, 1.0
+    slow = np.repeat(rng.normal(size=n // 512), 512)
+    x = ar1(0.3, n, seed=12) + 0.5 * slow
+    t = np.arange(n) * dt
+    res = E.se_vs_time(t, x, start=0)
+    se_last, T_last = res.table["se"][-1], res.table["T"][-1]
+    target = 0.5 * se_last
+    need = res.time_to_reach(target)
+    assert need["T"] >= (se_last / target) ** 2 * T_last * (1 - 1e-9)

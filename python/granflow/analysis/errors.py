@@ -613,9 +613,10 @@ class SEvsTime:
         Columns: fraction, n, T (simulated averaging time), wall_time (or null), mean, se,
         se_err, tau, converged.
     C, C_err
-        Prefactor of ``SE = C / sqrt(T)`` fitted on the converged rows (weighted geometric mean
-        of ``se sqrt(T)``, weights ``(se / se_err)^2``).  The rows use nested prefixes of the
-        same data, so ``C_err`` is optimistic; the last row dominates the fit anyway.
+        Prefactor of ``SE = C / sqrt(T)``: ``se sqrt(T)`` of the full-length row when its
+        blocking converged (the longest, most reliable estimate); else the fit on the converged
+        rows (weighted geometric mean of ``se sqrt(T)``, weights ``(se / se_err)^2``), but not
+        less than the full-length row implies (then a lower bound; ``too_short`` is set).
     exponent, exponent_err
         Free log-log slope of SE vs T over converged rows (should be close to -1/2).
     wall_time_per_unit_t
@@ -774,6 +775,16 @@ def _se_table_result(rows: list[dict[str, Any]], wall: float | None, t_start: fl
     conv = table["converged"].to_numpy()
     C, C_err, ex, ex_err = _fit_inverse_sqrt(T, se, se_err, conv)
     too_short = (not bool(conv[-1])) or int(conv.sum()) < 2
+    if se[-1] > 0:
+        # anchor C on the full-length estimate: shorter prefixes hold fewer blocks and can miss
+        # the longer correlations (their tau grows with T), so a fit dominated by them
+        # predicted less time than the measured SE already implies. Unconverged, the last SE
+        # is itself an underestimate: C is then at least what it implies (a lower bound).
+        c_last = float(se[-1] * math.sqrt(T[-1]))
+        if not too_short:
+            C, C_err = c_last, float(se_err[-1] * math.sqrt(T[-1]))
+        elif not c_last <= C:
+            C = c_last
     msg = ""
     if too_short:
         msg = (
