@@ -13,6 +13,7 @@
 //! `Frictionless` the history type is `()`, so no history is allocated, stored or updated.
 
 use crate::error::{Error, Result};
+use crate::lanes::{Ln, PairIn, PairRes, V};
 use crate::V3;
 use std::marker::PhantomData;
 
@@ -370,6 +371,93 @@ impl<F: Form, T: Friction> Law<F, T> {
     #[inline(always)]
     pub fn damping_coefficient(&self, m_eff: f64) -> f64 {
         self.alpha * m_eff + self.beta * m_eff.sqrt()
+    }
+
+    /// The pair law on `L` contacts at once (`crate::lanes`): the equations of [`Law::eval`]
+    /// (000 A1-A3; the normal from j to i, the lever arms r R_i/(R_i+R_j)), with the
+    /// geometry and the reduced mass computed from the branch vector, and the branches of the
+    /// history rotation and of the Coulomb cap as selects. `stream`: add the streaming
+    /// velocity difference `c.sv` (a deforming cell).
+    #[inline(always)]
+    pub(crate) fn eval_pairs<const L: usize>(
+        &self,
+        c: &PairIn<L>,
+        dt: f64,
+        stream: bool,
+    ) -> PairRes<L> {
+        let sp = Ln::<L>::splat;
+        let zero = sp(0.0);
+        let rs = c.ri + c.rj;
+        let r = c.r2.sqrt();
+        let ims = c.imi + c.imj;
+        // one division for 1/r, 1/(R_i+R_j) and m_eff = 1/(1/m_i + 1/m_j)
+        let q = sp(1.0) / (r * rs * ims);
+        let inv_r = rs * ims * q;
+        let inv_rs = r * ims * q;
+        let meff = r * rs * q;
+        let n = c.d.scale(inv_r);
+        let delta = rs - r;
+        // lever arms l_i = r R_i/(R_i+R_j): the contact point lies on the branch vector and
+        // the pair torques conserve angular momentum; for equal spheres 002 (2.18b)
+        let arm = r * inv_rs;
+        let mut vrel = c.vi - c.vj;
+        if T::FRICTIONAL {
+            // without friction only v_n matters, and spin adds nothing to it ((w x n) . n = 0)
+            vrel = vrel - (c.wi.scale(c.ri) + c.wj.scale(c.rj)).scale(arm).cross(&n);
+        }
+        if stream {
+            vrel = vrel + c.sv;
+        }
+        let (mut s, mut sd) = ([1.0; L], [1.0; L]);
+        for l in 0..L {
+            (s[l], sd[l]) = F::factors(delta.0[l], rs.0[l], self.tsuji);
+        }
+        let (s, sd) = (Ln(s), Ln(sd));
+        let cn = (sp(self.alpha) * meff + sp(self.beta) * meff.sqrt()) * sd;
+        let vn = vrel.dot(&n);
+        let fn_s = s * sp(self.kn) * delta - cn * vn;
+        let fnv = n.scale(fn_s);
+        let ov = delta * inv_rs;
+        if !T::FRICTIONAL {
+            return PairRes {
+                f: fnv,
+                q: V::zero(),
+                u: c.u,
+                ov,
+                vrel,
+            };
+        }
+        let vt = vrel - n.scale(vn);
+        let kt = s * sp(self.kt);
+        let ct = sp(self.ratio_t) * cn;
+        let lim = sp(self.mu) * fn_s.abs();
+        // A3 / 2.19: u is carried along by the rotation of the normal: project onto the
+        // current tangent plane and restore |u| (when u is nonzero and the normal turned)
+        let u = c.u;
+        let u2 = u.dot(&u);
+        let un = u.dot(&n);
+        let up = u - n.scale(un);
+        let p2 = u2 - un * un;
+        let turned = p2.gt(zero).and(un.ne(zero));
+        let up = turned.select3(up.scale((u2 / p2).sqrt()), up);
+        let u = u2.gt(zero).select3(up, u);
+        let u = u + vt.scale(sp(dt));
+        let ft = u.scale(-kt) - vt.scale(ct);
+        let ft2 = ft.dot(&ft);
+        // sliding (A2, second line): cap |F_t| at mu |F_n|, and make the stored displacement
+        // consistent with the capped force
+        let slip = ft2.gt(lim * lim);
+        let ft = slip.select3(ft.scale(lim / ft2.sqrt()), ft);
+        let u = slip
+            .and(kt.gt(zero))
+            .select3((-(ft + vt.scale(ct))).div(kt), u);
+        PairRes {
+            f: fnv + ft,
+            q: n.cross(&ft).scale(-arm),
+            u,
+            ov,
+            vrel,
+        }
     }
 
     /// Evaluate the law for a pair in contact.

@@ -19,7 +19,7 @@
 use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::history::{Cursor, HistList};
+use crate::history::HistList;
 use crate::neighbor::{chunk_size, image_shifts, widen, NeighborList};
 use crate::particles::Particles;
 use crate::{M3, V3};
@@ -686,19 +686,16 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .map(|(c, ((((x, v), w), a), b))| {
-                let mut moved = false;
-                for l in 0..x.len() {
-                    let i = c * ch + l;
-                    let vn = v[l] + f[i] * (h * im[i]);
-                    v[l] = vn;
-                    x[l] += vn * dt;
-                    w[l] += t[i] * (h * ii[i]);
-                    let xi = x[l];
-                    moved |= (xi - widen(&xb[i])).norm_squared() > lim;
-                    a[l] = xr_record(&xi, rad[i]);
-                    b[l] = kin_record(&vn, &w[l], &f[i], &t[i], im[i], ii[i], h);
-                }
-                moved
+                let r = c * ch..c * ch + x.len();
+                let src = KickSrc {
+                    f: &f[r.clone()],
+                    t: &t[r.clone()],
+                    im: &im[r.clone()],
+                    ii: &ii[r.clone()],
+                    rad: &rad[r.clone()],
+                    xb: &xb[r],
+                };
+                kick_drift_pack_chunk(x, v, w, a, b, &src, h, dt, lim)
             })
             .reduce(|| false, |a, b| a || b)
     }
@@ -738,6 +735,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         p.inv_mass[i],
                         p.inv_inertia[i],
                         hdt,
+                        p.radius[i],
                     );
                 }
                 moved
@@ -863,7 +861,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let ch = chunk_size(self.p.len());
         let tstart = Instant::now();
         let dt = hist_dt;
-        let want_vir = VIR;
         let want_stats = STATS;
         let n = self.p.len();
         let nchunks = n.div_ceil(ch);
@@ -914,195 +911,45 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             })
             .collect();
 
+        let mut shifts4 = [[0.0; 4]; 27];
+        for (a, s) in shifts4.iter_mut().zip(shifts.iter()) {
+            *a = [s.x, s.y, s.z, 0.0];
+        }
+        let shared = crate::forceloop::Shared {
+            law,
+            dom,
+            planes,
+            wlaw,
+            g,
+            own_start,
+            pair_j,
+            pair_img,
+            shifts: shifts4,
+            xr,
+            kin,
+            mass,
+            dt,
+            ch,
+        };
         let results: Vec<ChunkOut> = pieces
             .into_par_iter()
             .zip(self.p.force.par_chunks_mut(ch))
             .zip(self.p.torque.par_chunks_mut(ch))
             .map(|((pc, fo), to)| {
                 let (c, hold, hnew, wold, wnew, cross, cstat, cidx, ps) = pc;
-                let mut out = ChunkOut::default();
-                let i0 = c * ch;
-                let i1 = i0 + fo.len();
-                let base = own_start[i0] as usize;
-                let mut xs = 0usize;
-                let mut hc = Cursor::new(hold);
-                let mut wc = Cursor::new(wold);
-                hnew.clear();
-                wnew.clear();
-                cross.clear();
-                cstat.clear();
-                fo.iter_mut().for_each(|f| *f = V3::zeros());
-                to.iter_mut().for_each(|t| *t = V3::zeros());
-                for i in i0..i1 {
-                    let li = i - i0;
-                    let (k0, k1) = (own_start[i] as usize, own_start[i + 1] as usize);
-                    // in-chunk contributions of earlier particles are already in fo/to
-                    let mut fsum = fo[li];
-                    let mut tsum = to[li];
-                    let [xi0, xi1, xi2, ri] = xr[i];
-                    let xi = V3::new(xi0, xi1, xi2);
-                    let ki = &kin[i];
-                    let vi = V3::new(ki[0], ki[1], ki[2]);
-                    let wi = V3::new(ki[4], ki[5], ki[6]);
-                    let imi = ki[3];
-                    for k in k0..k1 {
-                        // SAFETY: list indices are < n by construction (built from 0..n).
-                        let j = unsafe { *pair_j.get_unchecked(k) } as usize;
-                        let is_cross = j >= i1;
-                        let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
-                        let sh =
-                            unsafe { shifts.get_unchecked(*pair_img.get_unchecked(k) as usize) };
-                        let d = V3::new(xi0 - xj0 - sh.x, xi1 - xj1 - sh.y, xi2 - xj2 - sh.z);
-                        let r2 = d.norm_squared();
-                        let rs = ri + rj;
-                        if r2 >= rs * rs {
-                            // open: nothing stored (its history, if any, is not carried on)
-                            if is_cross {
-                                cidx[xs] = u32::MAX;
-                                xs += 1;
-                            }
-                            continue;
-                        }
-                        out.contacts += 1;
-                        let kk = (k - base) as u32;
-                        let r = r2.sqrt();
-                        let kj = unsafe { kin.get_unchecked(j) };
-                        // one division for 1/r, 1/(R_i+R_j) and m_eff = 1/(1/m_i + 1/m_j)
-                        let imj = kj[3];
-                        let ims = imi + imj;
-                        let q = 1.0 / (r * rs * ims);
-                        let inv_r = rs * ims * q;
-                        let inv_rs = r * ims * q;
-                        let meff = r * rs * q;
-                        let nrm = d * inv_r;
-                        let delta = rs - r;
-                        // Lever arms l_i = r R_i/(R_i+R_j), l_j = r R_j/(R_i+R_j): the contact
-                        // point lies on the branch vector and l_i + l_j = r, which makes the
-                        // pair torques conserve total angular momentum; for equal spheres this
-                        // is exactly 002 (2.18b), (w_i + w_j) x r_ij / 2.
-                        let arm = r * inv_rs;
-                        // kin holds velocities predicted to the end of the step,
-                        // v(n+1/2) + dt/2 a(n): the dashpot sees v(n+1) to O(dt^2) instead of
-                        // the half-step velocity (plain velocity Verlet: O(dt) error in e_n).
-                        let vj = V3::new(kj[0], kj[1], kj[2]);
-                        let wj = V3::new(kj[4], kj[5], kj[6]);
-                        // without friction only v_n matters, and spin adds nothing to it
-                        // ((w x n) . n = 0): the rotational part and the torques are skipped
-                        let mut vrel = vi - vj;
-                        if T::FRICTIONAL {
-                            vrel -= (arm * (ri * wi + rj * wj)).cross(&nrm);
-                        }
-                        if D::STREAMING {
-                            vrel += dom.streaming_velocity(&d);
-                        }
-                        let mut h = if T::FRICTIONAL {
-                            hc.take(kk)
-                        } else {
-                            T::History::default()
-                        };
-                        let pf = law.eval(&nrm, delta, rs, meff, &vrel, &mut h, dt);
-                        if T::FRICTIONAL {
-                            hnew.push(kk, h);
-                        }
-                        let qv = if T::FRICTIONAL {
-                            -arm * nrm.cross(&pf.ft)
-                        } else {
-                            V3::zeros()
-                        };
-                        fsum += pf.f;
-                        if T::FRICTIONAL {
-                            tsum += ri * qv;
-                        }
-                        if is_cross {
-                            cidx[xs] = cross.len() as u32;
-                            cross.push(PairOut { f: pf.f, q: qv });
-                        } else {
-                            let lj = j - i0;
-                            fo[lj] -= pf.f;
-                            if T::FRICTIONAL {
-                                to[lj] += rj * qv;
-                            }
-                        }
-                        let ov = delta * inv_rs;
-                        if ov > out.max_ov {
-                            out.max_ov = ov;
-                            out.at = (i, j);
-                        }
-                        if want_vir {
-                            out.vir += d * pf.f.transpose();
-                        }
-                        if want_stats {
-                            let half = 0.5 * d * pf.f.transpose();
-                            let mut rec = [0.0; 10];
-                            for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
-                                *a = *b;
-                            }
-                            rec[9] = 0.5 * pf.f.dot(&vrel);
-                            add10(&mut ps[li], &rec);
-                            if is_cross {
-                                cstat.push(rec);
-                            } else {
-                                add10(&mut ps[j - i0], &rec);
-                            }
-                        }
-                        xs += is_cross as usize;
-                    }
-                    if W::ON {
-                        let wl = wlaw.unwrap();
-                        for (w, pl) in planes.iter().enumerate() {
-                            let gap = pl.sign * (xi[pl.axis] - pl.pos);
-                            if gap >= ri {
-                                continue;
-                            }
-                            let mut nrm = V3::zeros();
-                            nrm[pl.axis] = pl.sign;
-                            let delta = ri - gap;
-                            // contact point on the plane: lever arm = gap; predicted
-                            // end-of-step velocities, as for pairs
-                            let vrel = if T::FRICTIONAL {
-                                vi - (gap * wi).cross(&nrm)
-                            } else {
-                                vi
-                            };
-                            let key = (li * MAX_WALLS + w) as u32;
-                            let mut h = if T::FRICTIONAL {
-                                wc.take(key)
-                            } else {
-                                T::History::default()
-                            };
-                            let pf = wl.eval(&nrm, delta, 2.0 * ri, mass[i], &vrel, &mut h, dt);
-                            if T::FRICTIONAL {
-                                wnew.push(key, h);
-                            }
-                            fsum += pf.f;
-                            if T::FRICTIONAL {
-                                tsum -= gap * nrm.cross(&pf.ft);
-                            }
-                            out.wall_force[w] -= pf.f;
-                            if want_stats {
-                                // branch vector from the contact point on the wall to the centre
-                                let full = (gap * nrm) * pf.f.transpose();
-                                let acc = &mut ps[li];
-                                for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
-                                    *a += b;
-                                }
-                                acc[9] += pf.f.dot(&vrel);
-                            }
-                            let ov = delta / (2.0 * ri);
-                            if ov > out.max_ov {
-                                out.max_ov = ov;
-                                out.at = (i, usize::MAX);
-                            }
-                        }
-                    }
-                    if G::ON {
-                        fsum += mass[i] * g;
-                    }
-                    fo[li] = fsum;
-                    to[li] = tsum;
-                }
-                debug_assert_eq!(xs, cidx.len());
-                out
+                let io = crate::forceloop::ChunkIo {
+                    fo,
+                    to,
+                    hold,
+                    hnew,
+                    wold,
+                    wnew,
+                    cross,
+                    cstat,
+                    cidx,
+                    ps,
+                };
+                crate::forceloop::chunk::<F, T, D, W, G, STATS, VIR>(&shared, c, io)
             })
             .collect();
         std::mem::swap(&mut self.hist, &mut self.hist_next);
@@ -1129,7 +976,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let cross = &self.cross;
             let cstat = &self.cross_stats;
             let cidx = &self.cross_idx;
-            let off = &nl.cross_off;
             let cs = &nl.cross_start;
             let slot = &nl.cross_slot;
             let mut ps_pieces = stat_pieces(&mut self.pstats, want_stats, ch, nchunks);
@@ -1143,35 +989,20 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 .zip(ps_pieces.par_drain(..))
                 .enumerate()
                 .for_each(|(c, ((((fo, to), vo), wo), ps))| {
-                    let i0 = c * ch;
-                    for l in 0..fo.len() {
-                        let i = i0 + l;
-                        let (a, b) = (cs[i] as usize, cs[i + 1] as usize);
-                        if a < b {
-                            let mut f = fo[l];
-                            let mut t = to[l];
-                            for &s in &slot[a..b] {
-                                let e = cidx[s as usize];
-                                if e != u32::MAX {
-                                    // the chunk that owns slot s (slots are numbered by chunk)
-                                    let src = off.partition_point(|&o| o <= s) - 1;
-                                    let o = &cross[src][e as usize];
-                                    f -= o.f;
-                                    t += rad[i] * o.q;
-                                    if want_stats {
-                                        add10(&mut ps[l], &cstat[src][e as usize]);
-                                    }
-                                }
-                            }
-                            fo[l] = f;
-                            to[l] = t;
-                        }
-                        if kick > 0.0 {
-                            // the arithmetic of nve_final
-                            vo[l] += fo[l] * (kick * im[i]);
-                            wo[l] += to[l] * (kick * ii[i]);
-                        }
-                    }
+                    let r = c * ch..c * ch + fo.len();
+                    let src = CrossSrc {
+                        cs: &cs[r.start..r.end + 1],
+                        slot,
+                        src: &nl.cross_src,
+                        cidx,
+                        cross,
+                        cstat,
+                        rad: &rad[r.clone()],
+                        im: &im[r.clone()],
+                        ii: &ii[r],
+                        kick,
+                    };
+                    cross_kick_chunk::<STATS>(fo, to, vo, wo, ps, &src);
                 });
         }
         self.diag = diag;
@@ -1185,12 +1016,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
 /// What one chunk of the force loop reports.
 #[derive(Default)]
-struct ChunkOut {
-    max_ov: f64,
-    at: (usize, usize),
-    vir: M3,
-    contacts: usize,
-    wall_force: [V3; MAX_WALLS],
+pub(crate) struct ChunkOut {
+    pub max_ov: f64,
+    pub at: (usize, usize),
+    pub vir: M3,
+    pub contacts: usize,
+    pub wall_force: [V3; MAX_WALLS],
 }
 
 /// Each chunk's slice of the per-particle statistics (empty slices when not asked for).
@@ -1207,6 +1038,181 @@ fn stat_pieces(
     }
 }
 
+/// What the cross-chunk pass reads for one chunk.
+struct CrossSrc<'a> {
+    /// cross_start of the chunk's particles (one more than the chunk).
+    cs: &'a [u32],
+    slot: &'a [u32],
+    /// Source chunk of each entry of `slot`.
+    src: &'a [u16],
+    cidx: &'a [u32],
+    cross: &'a [Vec<PairOut>],
+    cstat: &'a [Vec<[f64; 10]>],
+    rad: &'a [f64],
+    im: &'a [f64],
+    ii: &'a [f64],
+    kick: f64,
+}
+
+/// Phase 2 for one chunk: the cross pairs in contact onto their second particles, in list
+/// order, then (plain NVE in a step, `kick` > 0) the final half-kick; AVX2 where the CPU has
+/// it (the same bits either way).
+fn cross_kick_chunk<const STATS: bool>(
+    fo: &mut [V3],
+    to: &mut [V3],
+    vo: &mut [V3],
+    wo: &mut [V3],
+    ps: &mut [[f64; 10]],
+    s: &CrossSrc,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::lanes::wide() {
+        // SAFETY: `wide` checked that the CPU has AVX2
+        return unsafe { cross_kick_avx2::<STATS>(fo, to, vo, wo, ps, s) };
+    }
+    cross_kick::<STATS>(fo, to, vo, wo, ps, s)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn cross_kick_avx2<const STATS: bool>(
+    fo: &mut [V3],
+    to: &mut [V3],
+    vo: &mut [V3],
+    wo: &mut [V3],
+    ps: &mut [[f64; 10]],
+    s: &CrossSrc,
+) {
+    cross_kick::<STATS>(fo, to, vo, wo, ps, s)
+}
+
+#[inline(always)]
+fn cross_kick<const STATS: bool>(
+    fo: &mut [V3],
+    to: &mut [V3],
+    vo: &mut [V3],
+    wo: &mut [V3],
+    ps: &mut [[f64; 10]],
+    s: &CrossSrc,
+) {
+    let n = fo.len();
+    let (to, vo, wo) = (&mut to[..n], &mut vo[..n], &mut wo[..n]);
+    let (cs, rad, im, ii) = (&s.cs[..n + 1], &s.rad[..n], &s.im[..n], &s.ii[..n]);
+    for l in 0..n {
+        let (a, b) = (cs[l] as usize, cs[l + 1] as usize);
+        if a < b {
+            let mut f = fo[l];
+            let mut t = to[l];
+            for (&sl, &src) in s.slot[a..b].iter().zip(&s.src[a..b]) {
+                let e = s.cidx[sl as usize];
+                if e != u32::MAX {
+                    let o = &s.cross[src as usize][e as usize];
+                    f -= o.f;
+                    t += rad[l] * o.q;
+                    if STATS {
+                        add10(&mut ps[l], &s.cstat[src as usize][e as usize]);
+                    }
+                }
+            }
+            fo[l] = f;
+            to[l] = t;
+        }
+        if s.kick > 0.0 {
+            // the arithmetic of nve_final
+            vo[l] += fo[l] * (s.kick * im[l]);
+            wo[l] += to[l] * (s.kick * ii[l]);
+        }
+    }
+}
+
+/// What the fused half-kick, drift and packing pass reads of one chunk.
+struct KickSrc<'a> {
+    f: &'a [V3],
+    t: &'a [V3],
+    im: &'a [f64],
+    ii: &'a [f64],
+    rad: &'a [f64],
+    xb: &'a [[f32; 3]],
+}
+
+/// Half-kick, drift, displacement check and step records of one chunk (plain NVE), with AVX2
+/// where the CPU has it (elementwise arithmetic: the same bits either way). Returns whether a
+/// particle moved more than half the skin since the last build.
+#[allow(clippy::too_many_arguments)]
+fn kick_drift_pack_chunk(
+    x: &mut [V3],
+    v: &mut [V3],
+    w: &mut [V3],
+    a: &mut [[f64; 4]],
+    b: &mut [[f64; 8]],
+    s: &KickSrc,
+    h: f64,
+    dt: f64,
+    lim: f64,
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if crate::lanes::wide() {
+        // SAFETY: `wide` checked that the CPU has AVX2
+        return unsafe { kdp_avx2(x, v, w, a, b, s, h, dt, lim) };
+    }
+    kdp(x, v, w, a, b, s, h, dt, lim)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[allow(clippy::too_many_arguments)]
+#[target_feature(enable = "avx2")]
+fn kdp_avx2(
+    x: &mut [V3],
+    v: &mut [V3],
+    w: &mut [V3],
+    a: &mut [[f64; 4]],
+    b: &mut [[f64; 8]],
+    s: &KickSrc,
+    h: f64,
+    dt: f64,
+    lim: f64,
+) -> bool {
+    kdp(x, v, w, a, b, s, h, dt, lim)
+}
+
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn kdp(
+    x: &mut [V3],
+    v: &mut [V3],
+    w: &mut [V3],
+    a: &mut [[f64; 4]],
+    b: &mut [[f64; 8]],
+    s: &KickSrc,
+    h: f64,
+    dt: f64,
+    lim: f64,
+) -> bool {
+    let n = x.len();
+    // equal lengths let the compiler drop the bounds checks
+    let (v, w, a, b) = (&mut v[..n], &mut w[..n], &mut a[..n], &mut b[..n]);
+    let (f, t, im, ii, rad, xb) = (
+        &s.f[..n],
+        &s.t[..n],
+        &s.im[..n],
+        &s.ii[..n],
+        &s.rad[..n],
+        &s.xb[..n],
+    );
+    let mut moved = false;
+    for l in 0..n {
+        let vn = v[l] + f[l] * (h * im[l]);
+        v[l] = vn;
+        x[l] += vn * dt;
+        w[l] += t[l] * (h * ii[l]);
+        let xi = x[l];
+        moved |= (xi - widen(&xb[l])).norm_squared() > lim;
+        a[l] = xr_record(&xi, rad[l]);
+        b[l] = kin_record(&vn, &w[l], &f[l], &t[l], im[l], ii[l], h, rad[l]);
+    }
+    moved
+}
+
 /// Packed position record of the pair loop: (x, R).
 #[inline(always)]
 fn xr_record(x: &V3, r: f64) -> [f64; 4] {
@@ -1214,12 +1220,14 @@ fn xr_record(x: &V3, r: f64) -> [f64; 4] {
 }
 
 /// Packed velocity record of the pair loop: v and w predicted to the end of the step
-/// (v + h f/m, w + h t/I, h = dt/2) and 1/m.
+/// (v + h f/m, w + h t/I, h = dt/2), 1/m and R: the law's gather reads (v, 1/m) and (w, R)
+/// as two 32-byte halves.
 #[inline(always)]
-fn kin_record(v: &V3, w: &V3, f: &V3, t: &V3, im: f64, ii: f64, h: f64) -> [f64; 8] {
+#[allow(clippy::too_many_arguments)]
+fn kin_record(v: &V3, w: &V3, f: &V3, t: &V3, im: f64, ii: f64, h: f64, r: f64) -> [f64; 8] {
     let vp = v + (h * im) * f;
     let wp = w + (h * ii) * t;
-    [vp.x, vp.y, vp.z, im, wp.x, wp.y, wp.z, 0.0]
+    [vp.x, vp.y, vp.z, im, wp.x, wp.y, wp.z, r]
 }
 
 #[inline(always)]

@@ -47,6 +47,8 @@ pub struct NeighborList {
     /// particle is j, in list order.
     pub cross_start: Vec<u32>,
     pub cross_slot: Vec<u32>,
+    /// The chunk that owns each entry of cross_slot (slots are numbered by chunk).
+    pub cross_src: Vec<u16>,
     /// Positions at the last build (for the half-skin criterion).
     /// (single precision: it only decides when to rebuild, with `xb_eps` as the margin).
     pub x_build: Vec<[f32; 3]>,
@@ -66,6 +68,7 @@ impl NeighborList {
             cross_off: vec![],
             cross_start: vec![],
             cross_slot: vec![],
+            cross_src: vec![],
             x_build: vec![],
             xb_eps: 0.0,
             builds: 0,
@@ -330,10 +333,20 @@ impl NeighborList {
             self.cross_start[j + 1] += self.cross_start[j];
         }
         self.cross_slot = vec![0; partner.len()];
+        assert!(
+            nchunks <= u16::MAX as usize + 1,
+            "too many force-loop chunks"
+        );
+        self.cross_src = vec![0; partner.len()];
         let mut fill = self.cross_start.clone();
-        for (s, &j) in partner.iter().enumerate() {
-            self.cross_slot[fill[j as usize] as usize] = s as u32;
-            fill[j as usize] += 1;
+        for c in 0..nchunks {
+            let (a, b) = (self.cross_off[c] as usize, self.cross_off[c + 1] as usize);
+            for (s, &j) in partner.iter().enumerate().take(b).skip(a) {
+                let j = j as usize;
+                self.cross_slot[fill[j] as usize] = s as u32;
+                self.cross_src[fill[j] as usize] = c as u16;
+                fill[j] += 1;
+            }
         }
     }
 }

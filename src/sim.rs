@@ -125,6 +125,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     + vec_bytes(&nl.cross_off)
                     + vec_bytes(&nl.cross_start)
                     + vec_bytes(&nl.cross_slot)
+                    + vec_bytes(&nl.cross_src)
                     + vec_bytes(&nl.pair_img)
                     + vec_bytes(&nl.x_build),
             ),

@@ -1,0 +1,788 @@
+//! One chunk of the pair force loop (see `Engine::evaluate`), in three passes over blocks of
+//! `BLOCK` particles:
+//! 1. the distance test over the block's listed pairs, appending the contacts (in list order)
+//!    to a per-thread buffer;
+//! 2. the contact law on lanes of `LANES` contacts (`crate::lanes`), and the sums of the
+//!    forces and torques onto both particles in list order;
+//! 3. walls and gravity, particle by particle.
+//!
+//! Compiled twice: with AVX2 (four lanes per instruction, the pair records transposed into
+//! lanes with shuffles) and for baseline x86-64; the CPU picks at run time
+//! (`crate::lanes::wide`). Both do the same IEEE operations in the same order, and the sums
+//! have the order of the pair list, so the result is the same bits for either path and any
+//! number of threads.
+
+use crate::contact::{Form, Friction, Law};
+use crate::domain::Domain;
+use crate::engine::{Body, ChunkOut, PairOut, Plane, Walls, MAX_WALLS};
+use crate::history::{Cursor, HistList};
+use crate::lanes::{Ln, PairIn, V};
+use crate::V3;
+use std::cell::RefCell;
+
+/// Particles per block: the block's contacts stay in L1.
+const BLOCK: usize = 32;
+/// Contacts per lane group of the law.
+const LANES: usize = 4;
+
+/// What every chunk reads.
+pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
+    pub law: &'a Law<F, T>,
+    pub dom: &'a D,
+    pub planes: &'a [Plane],
+    pub wlaw: Option<&'a Law<F, T>>,
+    pub g: V3,
+    pub own_start: &'a [u32],
+    pub pair_j: &'a [u32],
+    pub pair_img: &'a [u8],
+    /// Periodic image shifts by image code, padded to 4 doubles.
+    pub shifts: [[f64; 4]; 27],
+    /// (x, R) per particle.
+    pub xr: &'a [[f64; 4]],
+    /// (v, 1/m, w, R) per particle, v and w predicted to the end of the step.
+    pub kin: &'a [[f64; 8]],
+    pub mass: &'a [f64],
+    pub dt: f64,
+    pub ch: usize,
+}
+
+/// What one chunk writes.
+pub(crate) struct ChunkIo<'a, H> {
+    pub fo: &'a mut [V3],
+    pub to: &'a mut [V3],
+    pub hold: &'a HistList<H>,
+    pub hnew: &'a mut HistList<H>,
+    pub wold: &'a HistList<H>,
+    pub wnew: &'a mut HistList<H>,
+    pub cross: &'a mut Vec<PairOut>,
+    pub cstat: &'a mut Vec<[f64; 10]>,
+    pub cidx: &'a mut [u32],
+    pub ps: &'a mut [[f64; 10]],
+}
+
+/// Per-thread contact buffer of a block, sized to the largest block seen (no allocation per
+/// step). Contact c: particle i, partner j, pair index within the chunk (the history key),
+/// cross slot (u32::MAX for an in-chunk pair), branch vector and its squared length.
+#[derive(Default)]
+struct Scratch {
+    /// Owner of each listed pair of the block (AVX2 pass 1).
+    own: Vec<u32>,
+    li: Vec<u32>,
+    j: Vec<u32>,
+    kk: Vec<u32>,
+    slot: Vec<u32>,
+    dx: Vec<f64>,
+    dy: Vec<f64>,
+    dz: Vec<f64>,
+    r2: Vec<f64>,
+    /// New tangential displacements (pass 2).
+    ux: Vec<f64>,
+    uy: Vec<f64>,
+    uz: Vec<f64>,
+}
+
+impl Scratch {
+    /// Room for `contacts` plus a lane group of padding.
+    fn fit(&mut self, contacts: usize) {
+        let want = contacts + LANES;
+        if self.li.len() < want {
+            for v in [
+                &mut self.own,
+                &mut self.li,
+                &mut self.j,
+                &mut self.kk,
+                &mut self.slot,
+            ] {
+                v.resize(want, 0);
+            }
+            for v in [
+                &mut self.dx,
+                &mut self.dy,
+                &mut self.dz,
+                &mut self.r2,
+                &mut self.ux,
+                &mut self.uy,
+                &mut self.uz,
+            ] {
+                v.resize(want, 0.0);
+            }
+        }
+    }
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// Forces of chunk `c` with the instruction set chosen at run time.
+pub(crate) fn chunk<F, T, D, W, G, const STATS: bool, const VIR: bool>(
+    s: &Shared<F, T, D>,
+    c: usize,
+    io: ChunkIo<T::History>,
+) -> ChunkOut
+where
+    F: Form,
+    T: Friction,
+    D: Domain,
+    W: Walls<F, T>,
+    G: Body,
+{
+    #[cfg(target_arch = "x86_64")]
+    if crate::lanes::wide() {
+        // SAFETY: `wide` checked that the CPU has AVX2.
+        return unsafe { chunk_avx2::<F, T, D, W, G, STATS, VIR>(s, c, io) };
+    }
+    chunk_impl::<F, T, D, W, G, STATS, VIR, false>(s, c, io)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn chunk_avx2<F, T, D, W, G, const STATS: bool, const VIR: bool>(
+    s: &Shared<F, T, D>,
+    c: usize,
+    io: ChunkIo<T::History>,
+) -> ChunkOut
+where
+    F: Form,
+    T: Friction,
+    D: Domain,
+    W: Walls<F, T>,
+    G: Body,
+{
+    chunk_impl::<F, T, D, W, G, STATS, VIR, true>(s, c, io)
+}
+
+#[inline(always)]
+fn chunk_impl<F, T, D, W, G, const STATS: bool, const VIR: bool, const AVX: bool>(
+    s: &Shared<F, T, D>,
+    c: usize,
+    io: ChunkIo<T::History>,
+) -> ChunkOut
+where
+    F: Form,
+    T: Friction,
+    D: Domain,
+    W: Walls<F, T>,
+    G: Body,
+{
+    let ChunkIo {
+        fo,
+        to,
+        hold,
+        hnew,
+        wold,
+        wnew,
+        cross,
+        cstat,
+        cidx,
+        ps,
+    } = io;
+    let mut out = ChunkOut::default();
+    let i0 = c * s.ch;
+    let i1 = i0 + fo.len();
+    let base = s.own_start[i0] as usize;
+    let mut xs = 0usize;
+    let mut hc = Cursor::new(hold);
+    let mut wc = Cursor::new(wold);
+    hnew.clear();
+    wnew.clear();
+    cross.clear();
+    cstat.clear();
+    fo.iter_mut().for_each(|f| *f = V3::zeros());
+    to.iter_mut().for_each(|t| *t = V3::zeros());
+    SCRATCH.with(|cell| {
+        let sc = &mut *cell.borrow_mut();
+        let mut b0 = i0;
+        while b0 < i1 {
+            let b1 = (b0 + BLOCK).min(i1);
+            sc.fit((s.own_start[b1] - s.own_start[b0]) as usize);
+            let nc = if AVX {
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs.
+                unsafe {
+                    avx::filter(s, sc, b0, b1, i1, base, &mut xs, cidx)
+                }
+                #[cfg(not(target_arch = "x86_64"))]
+                unreachable!()
+            } else {
+                filter(s, sc, b0, b1, i1, base, &mut xs, cidx)
+            };
+            out.contacts += nc;
+            let mut sums = Sums {
+                i0,
+                fo: &mut *fo,
+                to: &mut *to,
+                cross: &mut *cross,
+                cstat: &mut *cstat,
+                cidx: &mut *cidx,
+                ps: &mut *ps,
+                out: &mut out,
+            };
+            law_and_sums::<F, T, D, STATS, VIR, AVX>(s, sc, nc, &mut hc, hnew, &mut sums);
+            for i in b0..b1 {
+                walls_gravity::<F, T, W, G, STATS>(s, i, i0, fo, to, ps, &mut wc, wnew, &mut out);
+            }
+            b0 = b1;
+        }
+    });
+    debug_assert_eq!(xs, cidx.len());
+    out
+}
+
+/// Pass 1 (baseline): the distance test, contacts appended in list order. Returns their
+/// number. A cross slot that is open gets u32::MAX in `cidx`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn filter<F: Form, T: Friction, D>(
+    s: &Shared<F, T, D>,
+    sc: &mut Scratch,
+    b0: usize,
+    b1: usize,
+    i1: usize,
+    base: usize,
+    xs: &mut usize,
+    cidx: &mut [u32],
+) -> usize {
+    let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
+    let mut nc = 0usize;
+    let Scratch {
+        li,
+        j: sj,
+        kk,
+        slot,
+        dx: sdx,
+        dy: sdy,
+        dz: sdz,
+        r2: sr2,
+        ..
+    } = sc;
+    for i in b0..b1 {
+        let (k0, k1) = (s.own_start[i] as usize, s.own_start[i + 1] as usize);
+        let [xi0, xi1, xi2, ri] = xr[i];
+        for k in k0..k1 {
+            // SAFETY: list indices are < n by construction (built from 0..n); the scratch
+            // holds at least the block's pairs (`fit`).
+            let j = unsafe { *pair_j.get_unchecked(k) } as usize;
+            let is_cross = j >= i1;
+            let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
+            let sh = unsafe { s.shifts.get_unchecked(*pair_img.get_unchecked(k) as usize) };
+            let dx = xi0 - xj0 - sh[0];
+            let dy = xi1 - xj1 - sh[1];
+            let dz = xi2 - xj2 - sh[2];
+            let r2 = dx * dx + dy * dy + dz * dz;
+            let rs = ri + rj;
+            if r2 >= rs * rs {
+                // open: nothing stored (its history, if any, is not carried on)
+                if is_cross {
+                    cidx[*xs] = u32::MAX;
+                    *xs += 1;
+                }
+                continue;
+            }
+            unsafe {
+                *li.get_unchecked_mut(nc) = i as u32;
+                *sj.get_unchecked_mut(nc) = j as u32;
+                *kk.get_unchecked_mut(nc) = (k - base) as u32;
+                *slot.get_unchecked_mut(nc) = if is_cross { *xs as u32 } else { u32::MAX };
+                *sdx.get_unchecked_mut(nc) = dx;
+                *sdy.get_unchecked_mut(nc) = dy;
+                *sdz.get_unchecked_mut(nc) = dz;
+                *sr2.get_unchecked_mut(nc) = r2;
+            }
+            *xs += is_cross as usize;
+            nc += 1;
+        }
+    }
+    nc
+}
+
+/// Where pass 2 adds its forces.
+struct Sums<'a, 'b> {
+    i0: usize,
+    fo: &'a mut [V3],
+    to: &'a mut [V3],
+    cross: &'a mut Vec<PairOut>,
+    cstat: &'a mut Vec<[f64; 10]>,
+    cidx: &'a mut [u32],
+    ps: &'a mut [[f64; 10]],
+    out: &'b mut ChunkOut,
+}
+
+/// Pass 2: the law on lanes of contacts, then each contact's force and torques onto its two
+/// particles (in-chunk partners in place, cross partners through the chunk's buffer), in
+/// list order: the order, and so the bits, of a one-pair-at-a-time loop.
+#[inline(always)]
+fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
+    s: &Shared<F, T, D>,
+    sc: &mut Scratch,
+    nc: usize,
+    hc: &mut Cursor<T::History>,
+    hnew: &mut HistList<T::History>,
+    o: &mut Sums,
+) where
+    F: Form,
+    T: Friction,
+    D: Domain,
+{
+    const L: usize = LANES;
+    assert!(nc + L <= sc.li.len());
+    let z = Ln::<L>::splat(0.0);
+    let zv = V { x: z, y: z, z };
+    let mut p = PairIn {
+        d: zv,
+        r2: z,
+        ri: z,
+        rj: z,
+        imi: z,
+        imj: z,
+        vi: zv,
+        vj: zv,
+        wi: zv,
+        wj: zv,
+        sv: zv,
+        u: zv,
+    };
+    let mut b = 0;
+    while b < nc {
+        // a short last group repeats its last contact (results not used)
+        let cl = |l: usize| (b + l).min(nc - 1);
+        if AVX {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: AVX only in `chunk_avx2`; indices come from pass 1 (< n), and
+            // b + L <= the scratch length (asserted above).
+            unsafe {
+                avx::gather::<T>(s, sc, b, cl, &mut p)
+            };
+        } else {
+            for l in 0..L {
+                let c = cl(l);
+                let (i, j) = (sc.li[c] as usize, sc.j[c] as usize);
+                p.d.x.0[l] = sc.dx[c];
+                p.d.y.0[l] = sc.dy[c];
+                p.d.z.0[l] = sc.dz[c];
+                p.r2.0[l] = sc.r2[c];
+                let (ki, kj) = (&s.kin[i], &s.kin[j]);
+                p.ri.0[l] = ki[7];
+                p.rj.0[l] = kj[7];
+                p.imi.0[l] = ki[3];
+                p.imj.0[l] = kj[3];
+                p.vi.x.0[l] = ki[0];
+                p.vi.y.0[l] = ki[1];
+                p.vi.z.0[l] = ki[2];
+                p.vj.x.0[l] = kj[0];
+                p.vj.y.0[l] = kj[1];
+                p.vj.z.0[l] = kj[2];
+                if T::FRICTIONAL {
+                    p.wi.x.0[l] = ki[4];
+                    p.wi.y.0[l] = ki[5];
+                    p.wi.z.0[l] = ki[6];
+                    p.wj.x.0[l] = kj[4];
+                    p.wj.y.0[l] = kj[5];
+                    p.wj.z.0[l] = kj[6];
+                }
+            }
+        }
+        let m = L.min(nc - b);
+        if T::FRICTIONAL {
+            for l in 0..m {
+                let u = T::to_array(&hc.take(sc.kk[b + l]));
+                p.u.x.0[l] = u[0];
+                p.u.y.0[l] = u[1];
+                p.u.z.0[l] = u[2];
+            }
+        }
+        if D::STREAMING {
+            for l in 0..L {
+                let sv = s
+                    .dom
+                    .streaming_velocity(&V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]));
+                p.sv.x.0[l] = sv.x;
+                p.sv.y.0[l] = sv.y;
+                p.sv.z.0[l] = sv.z;
+            }
+        }
+        let r = s.law.eval_pairs::<L>(&p, s.dt, D::STREAMING);
+        if T::FRICTIONAL {
+            // the new histories, pushed after the block (list order)
+            let put = |v: &mut Vec<f64>, x: Ln<L>| v[b..b + L].copy_from_slice(&x.0);
+            put(&mut sc.ux, r.u.x);
+            put(&mut sc.uy, r.u.y);
+            put(&mut sc.uz, r.u.z);
+        }
+        for l in 0..m {
+            let c = b + l;
+            // SAFETY: c < nc <= the scratch length; li, lj are in the chunk (pass 1: i is,
+            // and an in-chunk partner j < i1)
+            let (i, j, slot) = unsafe {
+                (
+                    *sc.li.get_unchecked(c) as usize,
+                    *sc.j.get_unchecked(c) as usize,
+                    *sc.slot.get_unchecked(c),
+                )
+            };
+            let f = V3::new(r.f.x.0[l], r.f.y.0[l], r.f.z.0[l]);
+            let q = V3::new(r.q.x.0[l], r.q.y.0[l], r.q.z.0[l]);
+            let li = i - o.i0;
+            debug_assert!(li < o.fo.len() && li < o.to.len());
+            unsafe { *o.fo.get_unchecked_mut(li) += f };
+            if T::FRICTIONAL {
+                unsafe { *o.to.get_unchecked_mut(li) += p.ri.0[l] * q };
+            }
+            let is_cross = slot != u32::MAX;
+            if is_cross {
+                o.cidx[slot as usize] = o.cross.len() as u32;
+                o.cross.push(PairOut { f, q });
+            } else {
+                let lj = j - o.i0;
+                debug_assert!(lj < o.fo.len() && lj < o.to.len());
+                unsafe { *o.fo.get_unchecked_mut(lj) -= f };
+                if T::FRICTIONAL {
+                    unsafe { *o.to.get_unchecked_mut(lj) += p.rj.0[l] * q };
+                }
+            }
+            let ov = r.ov.0[l];
+            if ov > o.out.max_ov {
+                o.out.max_ov = ov;
+                o.out.at = (i, j);
+            }
+            if VIR || STATS {
+                let d = V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]);
+                if VIR {
+                    o.out.vir += d * f.transpose();
+                }
+                if STATS {
+                    let vrel = V3::new(r.vrel.x.0[l], r.vrel.y.0[l], r.vrel.z.0[l]);
+                    let half = 0.5 * d * f.transpose();
+                    let mut rec = [0.0; 10];
+                    for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
+                        *a = *b;
+                    }
+                    rec[9] = 0.5 * f.dot(&vrel);
+                    add10(&mut o.ps[li], &rec);
+                    if is_cross {
+                        o.cstat.push(rec);
+                    } else {
+                        add10(&mut o.ps[j - o.i0], &rec);
+                    }
+                }
+            }
+        }
+        b += L;
+    }
+    if T::FRICTIONAL {
+        hnew.keys.extend_from_slice(&sc.kk[..nc]);
+        hnew.vals
+            .extend((0..nc).map(|c| T::from_array([sc.ux[c], sc.uy[c], sc.uz[c]])));
+    }
+}
+
+/// Pass 3 for particle i: wall contacts and gravity, after all its pair contacts.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn walls_gravity<F, T, W, G, const STATS: bool>(
+    s: &Shared<F, T, impl Domain>,
+    i: usize,
+    i0: usize,
+    fo: &mut [V3],
+    to: &mut [V3],
+    ps: &mut [[f64; 10]],
+    wc: &mut Cursor<T::History>,
+    wnew: &mut HistList<T::History>,
+    out: &mut ChunkOut,
+) where
+    F: Form,
+    T: Friction,
+    W: Walls<F, T>,
+    G: Body,
+{
+    let li = i - i0;
+    // most particles touch no wall: test the gaps before loading anything else
+    if W::ON
+        && s.planes.iter().any(|pl| {
+            let x = &s.xr[i];
+            // the test of the loop below, negated (a NaN gap counts as touching there too)
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
+            let touching = !(pl.sign * (x[pl.axis] - pl.pos) >= x[3]);
+            touching
+        })
+    {
+        let mut fsum = fo[li];
+        let mut tsum = to[li];
+        let [x0, x1, x2, ri] = s.xr[i];
+        let xi = [x0, x1, x2];
+        let ki = &s.kin[i];
+        let vi = V3::new(ki[0], ki[1], ki[2]);
+        let wi = V3::new(ki[4], ki[5], ki[6]);
+        let wl = s.wlaw.unwrap();
+        for (w, pl) in s.planes.iter().enumerate() {
+            let gap = pl.sign * (xi[pl.axis] - pl.pos);
+            if gap >= ri {
+                continue;
+            }
+            let mut nrm = V3::zeros();
+            nrm[pl.axis] = pl.sign;
+            let delta = ri - gap;
+            // contact point on the plane: lever arm = gap; predicted end-of-step
+            // velocities, as for pairs
+            let vrel = if T::FRICTIONAL {
+                vi - (gap * wi).cross(&nrm)
+            } else {
+                vi
+            };
+            let key = (li * MAX_WALLS + w) as u32;
+            let mut h = if T::FRICTIONAL {
+                wc.take(key)
+            } else {
+                T::History::default()
+            };
+            let pf = wl.eval(&nrm, delta, 2.0 * ri, s.mass[i], &vrel, &mut h, s.dt);
+            if T::FRICTIONAL {
+                wnew.push(key, h);
+            }
+            fsum += pf.f;
+            if T::FRICTIONAL {
+                tsum -= gap * nrm.cross(&pf.ft);
+            }
+            out.wall_force[w] -= pf.f;
+            if STATS {
+                // branch vector from the contact point on the wall to the centre
+                let full = (gap * nrm) * pf.f.transpose();
+                let acc = &mut ps[li];
+                for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
+                    *a += b;
+                }
+                acc[9] += pf.f.dot(&vrel);
+            }
+            let ov = delta / (2.0 * ri);
+            if ov > out.max_ov {
+                out.max_ov = ov;
+                out.at = (i, usize::MAX);
+            }
+        }
+        fo[li] = fsum;
+        to[li] = tsum;
+    }
+    if G::ON {
+        fo[li] += s.mass[i] * s.g;
+    }
+}
+
+#[inline(always)]
+pub(crate) fn add10(acc: &mut [f64; 10], rec: &[f64; 10]) {
+    for (a, b) in acc.iter_mut().zip(rec) {
+        *a += b;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::{Scratch, Shared};
+    use crate::contact::{Form, Friction};
+    use crate::lanes::{Ln, PairIn};
+    use std::arch::x86_64::*;
+
+    /// Four 4-double records as four lanes of their components.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn transpose(a: __m256d, b: __m256d, c: __m256d, d: __m256d) -> [__m256d; 4] {
+        let t0 = _mm256_unpacklo_pd(a, b); // a0 b0 a2 b2
+        let t1 = _mm256_unpackhi_pd(a, b); // a1 b1 a3 b3
+        let t2 = _mm256_unpacklo_pd(c, d);
+        let t3 = _mm256_unpackhi_pd(c, d);
+        [
+            _mm256_permute2f128_pd(t0, t2, 0x20),
+            _mm256_permute2f128_pd(t1, t3, 0x20),
+            _mm256_permute2f128_pd(t0, t2, 0x31),
+            _mm256_permute2f128_pd(t1, t3, 0x31),
+        ]
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn ln(v: __m256d) -> Ln<4> {
+        // SAFETY: same size, any bit pattern is a valid f64
+        Ln(unsafe { std::mem::transmute::<__m256d, [f64; 4]>(v) })
+    }
+
+    /// Load 4 doubles at `p`.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn ld(p: *const f64) -> __m256d {
+        unsafe { _mm256_loadu_pd(p) }
+    }
+
+    /// Pass 1 with AVX2: the block's listed pairs four at a time, across particles (the
+    /// arithmetic of the baseline `filter`, lane by lane: d = (x_i - x_j) - shift on whole
+    /// (x, R) records, then transposed into lanes).
+    ///
+    /// # Safety
+    /// AVX2 CPU; `sc` fitted to the block's pairs.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn filter<F: Form, T: Friction, D>(
+        s: &Shared<F, T, D>,
+        sc: &mut Scratch,
+        b0: usize,
+        b1: usize,
+        i1: usize,
+        base: usize,
+        xs: &mut usize,
+        cidx: &mut [u32],
+    ) -> usize {
+        let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
+        let (kb, ke) = (s.own_start[b0] as usize, s.own_start[b1] as usize);
+        // the owner of every pair of the block (the list is stored by owner)
+        for i in b0..b1 {
+            let (k0, k1) = (s.own_start[i] as usize, s.own_start[i + 1] as usize);
+            sc.own[k0 - kb..k1 - kb].fill(i as u32);
+        }
+        let mut nc = 0usize;
+        let mut dd = [[0.0f64; 4]; 4];
+        let rmask = _mm256_castsi256_pd(_mm256_set_epi64x(-1, 0, 0, 0));
+        let lim = _mm_set1_epi32(i1 as i32 - 1);
+        let mut k = kb;
+        while k < ke {
+            let m = (ke - k).min(4);
+            // SAFETY: k + 4 <= ke <= the list length on the fast path; otherwise lanes past
+            // the block's pairs repeat its last pair (masked off below); own holds the
+            // block's pairs
+            let (is, js, cs) = unsafe {
+                if m == 4 {
+                    (
+                        std::ptr::read_unaligned(sc.own.as_ptr().add(k - kb) as *const [u32; 4]),
+                        std::ptr::read_unaligned(pair_j.as_ptr().add(k) as *const [u32; 4]),
+                        std::ptr::read_unaligned(pair_img.as_ptr().add(k) as *const [u8; 4]),
+                    )
+                } else {
+                    let kl = |l: usize| k + l.min(m - 1);
+                    (
+                        [0, 1, 2, 3].map(|l| *sc.own.get_unchecked(kl(l) - kb)),
+                        [0, 1, 2, 3].map(|l| *pair_j.get_unchecked(kl(l))),
+                        [0, 1, 2, 3].map(|l| *pair_img.get_unchecked(kl(l))),
+                    )
+                }
+            };
+            // SAFETY: i, j < n (the list is built from 0..n), image codes < 27
+            let rec = unsafe {
+                [0, 1, 2, 3].map(|l| {
+                    let xi = ld(xr.get_unchecked(is[l] as usize).as_ptr());
+                    let xj = ld(xr.get_unchecked(js[l] as usize).as_ptr());
+                    let sh = ld(s.shifts.get_unchecked(cs[l] as usize).as_ptr());
+                    // (dx, dy, dz, R_i + R_j)
+                    _mm256_blendv_pd(
+                        _mm256_sub_pd(_mm256_sub_pd(xi, xj), sh),
+                        _mm256_add_pd(xi, xj),
+                        rmask,
+                    )
+                })
+            };
+            let [dx, dy, dz, rs] = transpose(rec[0], rec[1], rec[2], rec[3]);
+            let r2 = _mm256_add_pd(
+                _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                _mm256_mul_pd(dz, dz),
+            );
+            // contact: !(r2 >= rs^2), exactly the baseline test (NaN included)
+            let closed = _mm256_cmp_pd::<_CMP_NGE_UQ>(r2, _mm256_mul_pd(rs, rs));
+            let lanes = (1u32 << m) - 1;
+            let cmask = (_mm256_movemask_pd(closed) as u32) & lanes;
+            // cross pairs: j >= i1 (indices < 2^31)
+            // SAFETY: 16 bytes
+            let jv = unsafe { _mm_loadu_si128(js.as_ptr() as *const __m128i) };
+            let xmask =
+                (_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(jv, lim))) as u32) & lanes;
+            if (cmask | xmask) != 0 {
+                if cmask != 0 {
+                    for (a, v) in dd.iter_mut().zip([dx, dy, dz, r2]) {
+                        // SAFETY: 4 doubles
+                        unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
+                    }
+                }
+                let mut bits = cmask | xmask;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let is_cross = (xmask >> l) & 1 == 1;
+                    if (cmask >> l) & 1 == 0 {
+                        cidx[*xs] = u32::MAX;
+                        *xs += 1;
+                        continue;
+                    }
+                    // SAFETY: nc < the block's pairs <= the scratch length
+                    unsafe {
+                        *sc.li.get_unchecked_mut(nc) = is[l];
+                        *sc.j.get_unchecked_mut(nc) = js[l];
+                        *sc.kk.get_unchecked_mut(nc) = (k + l - base) as u32;
+                        *sc.slot.get_unchecked_mut(nc) =
+                            if is_cross { *xs as u32 } else { u32::MAX };
+                        *sc.dx.get_unchecked_mut(nc) = dd[0][l];
+                        *sc.dy.get_unchecked_mut(nc) = dd[1][l];
+                        *sc.dz.get_unchecked_mut(nc) = dd[2][l];
+                        *sc.r2.get_unchecked_mut(nc) = dd[3][l];
+                    }
+                    *xs += is_cross as usize;
+                    nc += 1;
+                }
+            }
+            k += 4;
+        }
+        nc
+    }
+
+    /// Pass 2's gather with AVX2: the (v, 1/m) and (w, R) halves of four particles' records
+    /// transposed into lanes.
+    ///
+    /// # Safety
+    /// AVX2 CPU; `b + 4 <=` the scratch length; `cl(l) <` the number of contacts.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn gather<T: Friction>(
+        s: &Shared<impl Form, T, impl Sized>,
+        sc: &Scratch,
+        b: usize,
+        cl: impl Fn(usize) -> usize,
+        p: &mut PairIn<4>,
+    ) {
+        unsafe {
+            p.d.x = ln(ld(sc.dx.as_ptr().add(b)));
+            p.d.y = ln(ld(sc.dy.as_ptr().add(b)));
+            p.d.z = ln(ld(sc.dz.as_ptr().add(b)));
+            p.r2 = ln(ld(sc.r2.as_ptr().add(b)));
+            let ci = [0, 1, 2, 3].map(|l| *sc.li.get_unchecked(cl(l)) as usize);
+            let cj = [0, 1, 2, 3].map(|l| *sc.j.get_unchecked(cl(l)) as usize);
+            let kin = s.kin;
+            let lo = |ix: [usize; 4]| {
+                let r = ix.map(|i| ld(kin.get_unchecked(i).as_ptr()));
+                transpose(r[0], r[1], r[2], r[3])
+            };
+            let hi = |ix: [usize; 4]| {
+                let r = ix.map(|i| ld(kin.get_unchecked(i).as_ptr().add(4)));
+                transpose(r[0], r[1], r[2], r[3])
+            };
+            let [vx, vy, vz, im] = lo(ci);
+            p.vi.x = ln(vx);
+            p.vi.y = ln(vy);
+            p.vi.z = ln(vz);
+            p.imi = ln(im);
+            let [vx, vy, vz, im] = lo(cj);
+            p.vj.x = ln(vx);
+            p.vj.y = ln(vy);
+            p.vj.z = ln(vz);
+            p.imj = ln(im);
+            let [wx, wy, wz, r] = hi(ci);
+            p.ri = ln(r);
+            if T::FRICTIONAL {
+                p.wi.x = ln(wx);
+                p.wi.y = ln(wy);
+                p.wi.z = ln(wz);
+            }
+            let [wx, wy, wz, r] = hi(cj);
+            p.rj = ln(r);
+            if T::FRICTIONAL {
+                p.wj.x = ln(wx);
+                p.wj.y = ln(wy);
+                p.wj.z = ln(wz);
+            }
+        }
+    }
+}
