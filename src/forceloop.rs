@@ -190,6 +190,8 @@ where
     cstat.clear();
     fo.iter_mut().for_each(|f| *f = V3::zeros());
     to.iter_mut().for_each(|t| *t = V3::zeros());
+    // a cross slot stays open (u32::MAX) unless pass 2 finds the pair in contact
+    cidx.fill(u32::MAX);
     SCRATCH.with(|cell| {
         let sc = &mut *cell.borrow_mut();
         let mut b0 = i0;
@@ -200,12 +202,12 @@ where
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs.
                 unsafe {
-                    avx::filter(s, sc, b0, b1, i1, base, &mut xs, cidx)
+                    avx::filter(s, sc, b0, b1, i1, base, &mut xs)
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 unreachable!()
             } else {
-                filter(s, sc, b0, b1, i1, base, &mut xs, cidx)
+                filter(s, sc, b0, b1, i1, base, &mut xs)
             };
             out.contacts += nc;
             let mut sums = Sums {
@@ -230,7 +232,7 @@ where
 }
 
 /// Pass 1 (baseline): the distance test, contacts appended in list order. Returns their
-/// number. A cross slot that is open gets u32::MAX in `cidx`.
+/// number. Cross slots are numbered in list order, open ones included.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn filter<F: Form, T: Friction, D>(
@@ -241,7 +243,6 @@ fn filter<F: Form, T: Friction, D>(
     i1: usize,
     base: usize,
     xs: &mut usize,
-    cidx: &mut [u32],
 ) -> usize {
     let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
     let mut nc = 0usize;
@@ -273,10 +274,7 @@ fn filter<F: Form, T: Friction, D>(
             let rs = ri + rj;
             if r2 >= rs * rs {
                 // open: nothing stored (its history, if any, is not carried on)
-                if is_cross {
-                    cidx[*xs] = u32::MAX;
-                    *xs += 1;
-                }
+                *xs += is_cross as usize;
                 continue;
             }
             unsafe {
@@ -628,7 +626,6 @@ mod avx {
         i1: usize,
         base: usize,
         xs: &mut usize,
-        cidx: &mut [u32],
     ) -> usize {
         let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
         let (kb, ke) = (s.own_start[b0] as usize, s.own_start[b1] as usize);
@@ -639,6 +636,20 @@ mod avx {
         }
         let mut nc = 0usize;
         let mut dd = [[0.0f64; 4]; 4];
+        // cross slots stay open (u32::MAX) unless pass 2 finds them closed
+        let mut x = *xs;
+        let (li, sj, kk, sl) = (
+            sc.li.as_mut_ptr(),
+            sc.j.as_mut_ptr(),
+            sc.kk.as_mut_ptr(),
+            sc.slot.as_mut_ptr(),
+        );
+        let (sdx, sdy, sdz, sr2) = (
+            sc.dx.as_mut_ptr(),
+            sc.dy.as_mut_ptr(),
+            sc.dz.as_mut_ptr(),
+            sc.r2.as_mut_ptr(),
+        );
         let rmask = _mm256_castsi256_pd(_mm256_set_epi64x(-1, 0, 0, 0));
         let lim = _mm_set1_epi32(i1 as i32 - 1);
         let mut k = kb;
@@ -691,41 +702,39 @@ mod avx {
             let jv = unsafe { _mm_loadu_si128(js.as_ptr() as *const __m128i) };
             let xmask =
                 (_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(jv, lim))) as u32) & lanes;
-            if (cmask | xmask) != 0 {
-                if cmask != 0 {
-                    for (a, v) in dd.iter_mut().zip([dx, dy, dz, r2]) {
-                        // SAFETY: 4 doubles
-                        unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
-                    }
+            if cmask != 0 {
+                for (a, v) in dd.iter_mut().zip([dx, dy, dz, r2]) {
+                    // SAFETY: 4 doubles
+                    unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
                 }
-                let mut bits = cmask | xmask;
+                let mut bits = cmask;
                 while bits != 0 {
                     let l = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
-                    let is_cross = (xmask >> l) & 1 == 1;
-                    if (cmask >> l) & 1 == 0 {
-                        cidx[*xs] = u32::MAX;
-                        *xs += 1;
-                        continue;
-                    }
+                    // cross slots are numbered in list order, open ones included
+                    let slot = if (xmask >> l) & 1 == 1 {
+                        (x + (xmask & ((1 << l) - 1)).count_ones() as usize) as u32
+                    } else {
+                        u32::MAX
+                    };
                     // SAFETY: nc < the block's pairs <= the scratch length
                     unsafe {
-                        *sc.li.get_unchecked_mut(nc) = is[l];
-                        *sc.j.get_unchecked_mut(nc) = js[l];
-                        *sc.kk.get_unchecked_mut(nc) = (k + l - base) as u32;
-                        *sc.slot.get_unchecked_mut(nc) =
-                            if is_cross { *xs as u32 } else { u32::MAX };
-                        *sc.dx.get_unchecked_mut(nc) = dd[0][l];
-                        *sc.dy.get_unchecked_mut(nc) = dd[1][l];
-                        *sc.dz.get_unchecked_mut(nc) = dd[2][l];
-                        *sc.r2.get_unchecked_mut(nc) = dd[3][l];
+                        *li.add(nc) = is[l];
+                        *sj.add(nc) = js[l];
+                        *kk.add(nc) = (k + l - base) as u32;
+                        *sl.add(nc) = slot;
+                        *sdx.add(nc) = dd[0][l];
+                        *sdy.add(nc) = dd[1][l];
+                        *sdz.add(nc) = dd[2][l];
+                        *sr2.add(nc) = dd[3][l];
                     }
-                    *xs += is_cross as usize;
                     nc += 1;
                 }
             }
+            x += xmask.count_ones() as usize;
             k += 4;
         }
+        *xs = x;
         nc
     }
 
