@@ -702,34 +702,31 @@ mod avx {
             let jv = unsafe { _mm_loadu_si128(js.as_ptr() as *const __m128i) };
             let xmask =
                 (_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(jv, lim))) as u32) & lanes;
-            if cmask != 0 {
-                for (a, v) in dd.iter_mut().zip([dx, dy, dz, r2]) {
-                    // SAFETY: 4 doubles
-                    unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
+            for (a, v) in dd.iter_mut().zip([dx, dy, dz, r2]) {
+                // SAFETY: 4 doubles
+                unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
+            }
+            // every lane is written at the next free place, which advances only for a
+            // contact: no branch on the (unpredictable) test
+            for l in 0..4 {
+                // cross slots are numbered in list order, open ones included
+                let slot = if (xmask >> l) & 1 == 1 {
+                    (x + (xmask & ((1 << l) - 1)).count_ones() as usize) as u32
+                } else {
+                    u32::MAX
+                };
+                // SAFETY: nc <= the block's pairs, and the scratch has 4 places more
+                unsafe {
+                    *li.add(nc) = is[l];
+                    *sj.add(nc) = js[l];
+                    *kk.add(nc) = (k + l).wrapping_sub(base) as u32;
+                    *sl.add(nc) = slot;
+                    *sdx.add(nc) = dd[0][l];
+                    *sdy.add(nc) = dd[1][l];
+                    *sdz.add(nc) = dd[2][l];
+                    *sr2.add(nc) = dd[3][l];
                 }
-                let mut bits = cmask;
-                while bits != 0 {
-                    let l = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    // cross slots are numbered in list order, open ones included
-                    let slot = if (xmask >> l) & 1 == 1 {
-                        (x + (xmask & ((1 << l) - 1)).count_ones() as usize) as u32
-                    } else {
-                        u32::MAX
-                    };
-                    // SAFETY: nc < the block's pairs <= the scratch length
-                    unsafe {
-                        *li.add(nc) = is[l];
-                        *sj.add(nc) = js[l];
-                        *kk.add(nc) = (k + l - base) as u32;
-                        *sl.add(nc) = slot;
-                        *sdx.add(nc) = dd[0][l];
-                        *sdy.add(nc) = dd[1][l];
-                        *sdz.add(nc) = dd[2][l];
-                        *sr2.add(nc) = dd[3][l];
-                    }
-                    nc += 1;
-                }
+                nc += ((cmask >> l) & 1) as usize;
             }
             x += xmask.count_ones() as usize;
             k += 4;
