@@ -61,20 +61,15 @@ pub(crate) struct ChunkIo<'a, H> {
 }
 
 /// Per-thread contact buffer of a block, sized to the largest block seen (no allocation per
-/// step). Contact c: particle i, partner j, pair index within the chunk (the history key),
-/// cross slot (u32::MAX for an in-chunk pair), branch vector and its squared length.
+/// step). Contact c: `ids[c]` = (particle i, partner j, pair index within the chunk (the
+/// history key), cross slot or u32::MAX for an in-chunk pair) and `rec[c]` = (branch vector,
+/// R_i + R_j): one 16-byte and one 32-byte record, each written with one store.
 #[derive(Default)]
 struct Scratch {
     /// Owner of each listed pair of the block (AVX2 pass 1).
     own: Vec<u32>,
-    li: Vec<u32>,
-    j: Vec<u32>,
-    kk: Vec<u32>,
-    slot: Vec<u32>,
-    dx: Vec<f64>,
-    dy: Vec<f64>,
-    dz: Vec<f64>,
-    r2: Vec<f64>,
+    ids: Vec<[u32; 4]>,
+    rec: Vec<[f64; 4]>,
     /// New tangential displacements (pass 2).
     ux: Vec<f64>,
     uy: Vec<f64>,
@@ -85,25 +80,11 @@ impl Scratch {
     /// Room for `contacts` plus a lane group of padding.
     fn fit(&mut self, contacts: usize) {
         let want = contacts + LANES;
-        if self.li.len() < want {
-            for v in [
-                &mut self.own,
-                &mut self.li,
-                &mut self.j,
-                &mut self.kk,
-                &mut self.slot,
-            ] {
-                v.resize(want, 0);
-            }
-            for v in [
-                &mut self.dx,
-                &mut self.dy,
-                &mut self.dz,
-                &mut self.r2,
-                &mut self.ux,
-                &mut self.uy,
-                &mut self.uz,
-            ] {
+        if self.ids.len() < want {
+            self.own.resize(want, 0);
+            self.ids.resize(want, [0; 4]);
+            self.rec.resize(want, [0.0; 4]);
+            for v in [&mut self.ux, &mut self.uy, &mut self.uz] {
                 v.resize(want, 0.0);
             }
         }
@@ -246,17 +227,6 @@ fn filter<F: Form, T: Friction, D>(
 ) -> usize {
     let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
     let mut nc = 0usize;
-    let Scratch {
-        li,
-        j: sj,
-        kk,
-        slot,
-        dx: sdx,
-        dy: sdy,
-        dz: sdz,
-        r2: sr2,
-        ..
-    } = sc;
     for i in b0..b1 {
         let (k0, k1) = (s.own_start[i] as usize, s.own_start[i + 1] as usize);
         let [xi0, xi1, xi2, ri] = xr[i];
@@ -277,15 +247,10 @@ fn filter<F: Form, T: Friction, D>(
                 *xs += is_cross as usize;
                 continue;
             }
+            let slot = if is_cross { *xs as u32 } else { u32::MAX };
             unsafe {
-                *li.get_unchecked_mut(nc) = i as u32;
-                *sj.get_unchecked_mut(nc) = j as u32;
-                *kk.get_unchecked_mut(nc) = (k - base) as u32;
-                *slot.get_unchecked_mut(nc) = if is_cross { *xs as u32 } else { u32::MAX };
-                *sdx.get_unchecked_mut(nc) = dx;
-                *sdy.get_unchecked_mut(nc) = dy;
-                *sdz.get_unchecked_mut(nc) = dz;
-                *sr2.get_unchecked_mut(nc) = r2;
+                *sc.ids.get_unchecked_mut(nc) = [i as u32, j as u32, (k - base) as u32, slot];
+                *sc.rec.get_unchecked_mut(nc) = [dx, dy, dz, rs];
             }
             *xs += is_cross as usize;
             nc += 1;
@@ -323,7 +288,7 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
     D: Domain,
 {
     const L: usize = LANES;
-    assert!(nc + L <= sc.li.len());
+    assert!(nc + L <= sc.ids.len());
     let z = Ln::<L>::splat(0.0);
     let zv = V { x: z, y: z, z };
     let mut p = PairIn {
@@ -349,16 +314,18 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             // SAFETY: AVX only in `chunk_avx2`; indices come from pass 1 (< n), and
             // b + L <= the scratch length (asserted above).
             unsafe {
-                avx::gather::<T>(s, sc, b, cl, &mut p)
+                avx::gather::<T>(s, sc, cl, &mut p)
             };
         } else {
             for l in 0..L {
                 let c = cl(l);
-                let (i, j) = (sc.li[c] as usize, sc.j[c] as usize);
-                p.d.x.0[l] = sc.dx[c];
-                p.d.y.0[l] = sc.dy[c];
-                p.d.z.0[l] = sc.dz[c];
-                p.r2.0[l] = sc.r2[c];
+                let [i, j, _, _] = sc.ids[c].map(|v| v as usize);
+                let [dx, dy, dz, _] = sc.rec[c];
+                p.d.x.0[l] = dx;
+                p.d.y.0[l] = dy;
+                p.d.z.0[l] = dz;
+                // the squared distance of pass 1, recomputed (same operations, same bits)
+                p.r2.0[l] = dx * dx + dy * dy + dz * dz;
                 let (ki, kj) = (&s.kin[i], &s.kin[j]);
                 p.ri.0[l] = ki[7];
                 p.rj.0[l] = kj[7];
@@ -383,7 +350,7 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
         let m = L.min(nc - b);
         if T::FRICTIONAL {
             for l in 0..m {
-                let u = T::to_array(&hc.take(sc.kk[b + l]));
+                let u = T::to_array(&hc.take(sc.ids[b + l][2]));
                 p.u.x.0[l] = u[0];
                 p.u.y.0[l] = u[1];
                 p.u.z.0[l] = u[2];
@@ -411,13 +378,8 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             let c = b + l;
             // SAFETY: c < nc <= the scratch length; li, lj are in the chunk (pass 1: i is,
             // and an in-chunk partner j < i1)
-            let (i, j, slot) = unsafe {
-                (
-                    *sc.li.get_unchecked(c) as usize,
-                    *sc.j.get_unchecked(c) as usize,
-                    *sc.slot.get_unchecked(c),
-                )
-            };
+            let [i, j, _, slot] = unsafe { *sc.ids.get_unchecked(c) };
+            let (i, j) = (i as usize, j as usize);
             let f = V3::new(r.f.x.0[l], r.f.y.0[l], r.f.z.0[l]);
             let q = V3::new(r.q.x.0[l], r.q.y.0[l], r.q.z.0[l]);
             let li = i - o.i0;
@@ -468,7 +430,7 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
         b += L;
     }
     if T::FRICTIONAL {
-        hnew.keys.extend_from_slice(&sc.kk[..nc]);
+        hnew.keys.extend(sc.ids[..nc].iter().map(|e| e[2]));
         hnew.vals
             .extend((0..nc).map(|c| T::from_array([sc.ux[c], sc.uy[c], sc.uz[c]])));
     }
@@ -635,23 +597,12 @@ mod avx {
             sc.own[k0 - kb..k1 - kb].fill(i as u32);
         }
         let mut nc = 0usize;
-        let mut dd = [[0.0f64; 4]; 4];
         // cross slots stay open (u32::MAX) unless pass 2 finds them closed
         let mut x = *xs;
-        let (li, sj, kk, sl) = (
-            sc.li.as_mut_ptr(),
-            sc.j.as_mut_ptr(),
-            sc.kk.as_mut_ptr(),
-            sc.slot.as_mut_ptr(),
-        );
-        let (sdx, sdy, sdz, sr2) = (
-            sc.dx.as_mut_ptr(),
-            sc.dy.as_mut_ptr(),
-            sc.dz.as_mut_ptr(),
-            sc.r2.as_mut_ptr(),
-        );
         let rmask = _mm256_castsi256_pd(_mm256_set_epi64x(-1, 0, 0, 0));
         let lim = _mm_set1_epi32(i1 as i32 - 1);
+        let lane = _mm_set_epi32(3, 2, 1, 0);
+        let (ids, recs) = (sc.ids.as_mut_ptr(), sc.rec.as_mut_ptr());
         let mut k = kb;
         while k < ke {
             let m = (ke - k).min(4);
@@ -697,34 +648,44 @@ mod avx {
             let closed = _mm256_cmp_pd::<_CMP_NGE_UQ>(r2, _mm256_mul_pd(rs, rs));
             let lanes = (1u32 << m) - 1;
             let cmask = (_mm256_movemask_pd(closed) as u32) & lanes;
-            // cross pairs: j >= i1 (indices < 2^31)
-            // SAFETY: 16 bytes
-            let jv = unsafe { _mm_loadu_si128(js.as_ptr() as *const __m128i) };
-            let xmask =
-                (_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpgt_epi32(jv, lim))) as u32) & lanes;
-            for (a, v) in dd.iter_mut().zip([dx, dy, dz, r2]) {
-                // SAFETY: 4 doubles
-                unsafe { _mm256_storeu_pd(a.as_mut_ptr(), v) };
-            }
+            // SAFETY: 16 bytes each
+            let (iv, jv) = unsafe {
+                (
+                    _mm_loadu_si128(is.as_ptr() as *const __m128i),
+                    _mm_loadu_si128(js.as_ptr() as *const __m128i),
+                )
+            };
+            // cross pairs (j >= i1; indices < 2^31), numbered in list order, open ones
+            // included: slot = x + the cross lanes before this one
+            let xv = _mm_cmpgt_epi32(jv, lim);
+            let xmask = (_mm_movemask_ps(_mm_castsi128_ps(xv)) as u32) & lanes;
+            // SAFETY: xmask < 16
+            let before =
+                unsafe { _mm_loadu_si128(PREFIX[xmask as usize].as_ptr() as *const __m128i) };
+            let slot = _mm_blendv_epi8(
+                _mm_set1_epi32(-1),
+                _mm_add_epi32(_mm_set1_epi32(x as i32), before),
+                xv,
+            );
+            let kk = _mm_add_epi32(_mm_set1_epi32(k.wrapping_sub(base) as i32), lane);
+            // (i, j, kk, slot) per lane
+            let t0 = _mm_unpacklo_epi32(iv, jv);
+            let t1 = _mm_unpackhi_epi32(iv, jv);
+            let t2 = _mm_unpacklo_epi32(kk, slot);
+            let t3 = _mm_unpackhi_epi32(kk, slot);
+            let idr = [
+                _mm_unpacklo_epi64(t0, t2),
+                _mm_unpackhi_epi64(t0, t2),
+                _mm_unpacklo_epi64(t1, t3),
+                _mm_unpackhi_epi64(t1, t3),
+            ];
             // every lane is written at the next free place, which advances only for a
             // contact: no branch on the (unpredictable) test
             for l in 0..4 {
-                // cross slots are numbered in list order, open ones included
-                let slot = if (xmask >> l) & 1 == 1 {
-                    (x + (xmask & ((1 << l) - 1)).count_ones() as usize) as u32
-                } else {
-                    u32::MAX
-                };
                 // SAFETY: nc <= the block's pairs, and the scratch has 4 places more
                 unsafe {
-                    *li.add(nc) = is[l];
-                    *sj.add(nc) = js[l];
-                    *kk.add(nc) = (k + l).wrapping_sub(base) as u32;
-                    *sl.add(nc) = slot;
-                    *sdx.add(nc) = dd[0][l];
-                    *sdy.add(nc) = dd[1][l];
-                    *sdz.add(nc) = dd[2][l];
-                    *sr2.add(nc) = dd[3][l];
+                    _mm_storeu_si128(ids.add(nc) as *mut __m128i, idr[l]);
+                    _mm256_storeu_pd(recs.add(nc) as *mut f64, rec[l]);
                 }
                 nc += ((cmask >> l) & 1) as usize;
             }
@@ -735,27 +696,47 @@ mod avx {
         nc
     }
 
+    /// PREFIX[m][l]: the set bits of m below bit l.
+    const PREFIX: [[u32; 4]; 16] = {
+        let mut t = [[0u32; 4]; 16];
+        let mut m = 0;
+        while m < 16 {
+            let mut l = 0;
+            while l < 4 {
+                t[m][l] = ((m as u32) & ((1u32 << l) - 1)).count_ones();
+                l += 1;
+            }
+            m += 1;
+        }
+        t
+    };
+
     /// Pass 2's gather with AVX2: the (v, 1/m) and (w, R) halves of four particles' records
     /// transposed into lanes.
     ///
     /// # Safety
-    /// AVX2 CPU; `b + 4 <=` the scratch length; `cl(l) <` the number of contacts.
+    /// AVX2 CPU; `cl(l) <` the number of contacts.
     #[inline]
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn gather<T: Friction>(
         s: &Shared<impl Form, T, impl Sized>,
         sc: &Scratch,
-        b: usize,
         cl: impl Fn(usize) -> usize,
         p: &mut PairIn<4>,
     ) {
         unsafe {
-            p.d.x = ln(ld(sc.dx.as_ptr().add(b)));
-            p.d.y = ln(ld(sc.dy.as_ptr().add(b)));
-            p.d.z = ln(ld(sc.dz.as_ptr().add(b)));
-            p.r2 = ln(ld(sc.r2.as_ptr().add(b)));
-            let ci = [0, 1, 2, 3].map(|l| *sc.li.get_unchecked(cl(l)) as usize);
-            let cj = [0, 1, 2, 3].map(|l| *sc.j.get_unchecked(cl(l)) as usize);
+            let r = [0, 1, 2, 3].map(|l| ld(sc.rec.get_unchecked(cl(l)).as_ptr()));
+            let [dx, dy, dz, _] = transpose(r[0], r[1], r[2], r[3]);
+            p.d.x = ln(dx);
+            p.d.y = ln(dy);
+            p.d.z = ln(dz);
+            // the squared distance of pass 1, recomputed (same operations, same bits)
+            p.r2 = ln(_mm256_add_pd(
+                _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                _mm256_mul_pd(dz, dz),
+            ));
+            let ci = [0, 1, 2, 3].map(|l| sc.ids.get_unchecked(cl(l))[0] as usize);
+            let cj = [0, 1, 2, 3].map(|l| sc.ids.get_unchecked(cl(l))[1] as usize);
             let kin = s.kin;
             let lo = |ix: [usize; 4]| {
                 let r = ix.map(|i| ld(kin.get_unchecked(i).as_ptr()));
