@@ -393,6 +393,23 @@ fn one_and_two_threads_bitwise_identical() {
 }
 
 #[test]
+fn avx2_and_baseline_paths_bitwise_identical() {
+    // The force loop runs with AVX2 where the CPU has it and with baseline x86-64 otherwise;
+    // both must give the same bits (same IEEE operations, same order). Without AVX2 on this
+    // CPU both runs take the baseline path and the test checks nothing more than determinism.
+    let wide = crate::lanes::wide();
+    crate::lanes::set_wide(false);
+    let a = dense_packing_run(2);
+    crate::lanes::set_wide(true);
+    let b = dense_packing_run(2);
+    crate::lanes::set_wide(wide);
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x.as_slice(), y.as_slice());
+    }
+}
+
+#[test]
 fn checkpoint_restart_is_bitwise_identical() {
     use crate::checkpoint::{Reader, Writer};
     let l = 8.0;
