@@ -639,6 +639,14 @@ mod avx {
                     )
                 })
             };
+            // the velocity records of the partners, for pass 2 (at large N they would
+            // otherwise come from the last-level cache one contact at a time)
+            for &j in &js {
+                // SAFETY: a prefetch of an address in the array
+                unsafe {
+                    _mm_prefetch::<_MM_HINT_T0>(s.kin.as_ptr().add(j as usize) as *const i8)
+                };
+            }
             let [dx, dy, dz, rs] = transpose(rec[0], rec[1], rec[2], rec[3]);
             let r2 = _mm256_add_pd(
                 _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
