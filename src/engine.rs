@@ -8,10 +8,12 @@
 //! 2. rebuild the pair list (wrapping positions into the cell, sorting particles along a Morton
 //!    curve) if a particle moved more than half the skin;
 //! 3. forces, parallel over fixed chunks of particles whose size depends on N only: a chunk
-//!    sums the pairs inside it in place and buffers the pairs reaching into later chunks, adds
-//!    walls and gravity; a second pass adds the buffered pairs to their second particles (and,
-//!    for plain NVE, applies the final half-kick). Every floating-point sum has an order fixed
-//!    by the list, so any number of threads gives the same bits;
+//!    (`crate::forceloop`, in blocks of 32 particles: distance test, contact law on lanes of 4
+//!    contacts, walls and gravity) sums the pairs inside it in place and buffers the pairs
+//!    reaching into later chunks; a second pass adds the buffered pairs to their second
+//!    particles (and, for plain NVE, applies the final half-kick). Every floating-point sum
+//!    has an order fixed by the list, so any number of threads, and AVX2 or not, gives the
+//!    same bits;
 //! 4. second half-kick (and the cell's momentum update) where the domain has its own dynamics.
 //!
 //! Tangential histories are stored per closed contact (`crate::history`), not per listed pair.
