@@ -387,7 +387,7 @@ impl<F: Form, T: Friction> Law<F, T> {
     ) -> PairRes<L> {
         let sp = Ln::<L>::splat;
         let zero = sp(0.0);
-        let rs = c.ri + c.rj;
+        let rs = c.rs;
         let r = c.r2.sqrt();
         let ims = c.imi + c.imj;
         // one division for 1/r, 1/(R_i+R_j) and m_eff = 1/(1/m_i + 1/m_j)

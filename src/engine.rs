@@ -697,7 +697,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     rad: &rad[r.clone()],
                     xb: &xb[r],
                 };
-                kick_drift_pack_chunk(x, v, w, a, b, &src, h, dt, lim)
+                kick_drift_pack_chunk::<T>(x, v, w, a, b, &src, h, dt, lim)
             })
             .reduce(|| false, |a, b| a || b)
     }
@@ -1004,7 +1004,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         ii: &ii[r],
                         kick,
                     };
-                    cross_kick_chunk::<STATS>(fo, to, vo, wo, ps, &src);
+                    cross_kick_chunk::<STATS, T>(fo, to, vo, wo, ps, &src);
                 });
         }
         self.diag = diag;
@@ -1059,7 +1059,7 @@ struct CrossSrc<'a> {
 /// Phase 2 for one chunk: the cross pairs in contact onto their second particles, in list
 /// order, then (plain NVE in a step, `kick` > 0) the final half-kick; AVX2 where the CPU has
 /// it (the same bits either way).
-fn cross_kick_chunk<const STATS: bool>(
+fn cross_kick_chunk<const STATS: bool, T: Friction>(
     fo: &mut [V3],
     to: &mut [V3],
     vo: &mut [V3],
@@ -1070,14 +1070,14 @@ fn cross_kick_chunk<const STATS: bool>(
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
-        return unsafe { cross_kick_avx2::<STATS>(fo, to, vo, wo, ps, s) };
+        return unsafe { cross_kick_avx2::<STATS, T>(fo, to, vo, wo, ps, s) };
     }
-    cross_kick::<STATS>(fo, to, vo, wo, ps, s)
+    cross_kick::<STATS, T>(fo, to, vo, wo, ps, s)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn cross_kick_avx2<const STATS: bool>(
+fn cross_kick_avx2<const STATS: bool, T: Friction>(
     fo: &mut [V3],
     to: &mut [V3],
     vo: &mut [V3],
@@ -1085,11 +1085,11 @@ fn cross_kick_avx2<const STATS: bool>(
     ps: &mut [[f64; 10]],
     s: &CrossSrc,
 ) {
-    cross_kick::<STATS>(fo, to, vo, wo, ps, s)
+    cross_kick::<STATS, T>(fo, to, vo, wo, ps, s)
 }
 
 #[inline(always)]
-fn cross_kick<const STATS: bool>(
+fn cross_kick<const STATS: bool, T: Friction>(
     fo: &mut [V3],
     to: &mut [V3],
     vo: &mut [V3],
@@ -1110,7 +1110,9 @@ fn cross_kick<const STATS: bool>(
                 if e != u32::MAX {
                     let o = &s.cross[src as usize][e as usize];
                     f -= o.f;
-                    t += rad[l] * o.q;
+                    if T::FRICTIONAL {
+                        t += rad[l] * o.q;
+                    }
                     if STATS {
                         add10(&mut ps[l], &s.cstat[src as usize][e as usize]);
                     }
@@ -1122,7 +1124,9 @@ fn cross_kick<const STATS: bool>(
         if s.kick > 0.0 {
             // the arithmetic of nve_final
             vo[l] += fo[l] * (s.kick * im[l]);
-            wo[l] += to[l] * (s.kick * ii[l]);
+            if T::FRICTIONAL {
+                wo[l] += to[l] * (s.kick * ii[l]);
+            }
         }
     }
 }
@@ -1141,7 +1145,7 @@ struct KickSrc<'a> {
 /// where the CPU has it (elementwise arithmetic: the same bits either way). Returns whether a
 /// particle moved more than half the skin since the last build.
 #[allow(clippy::too_many_arguments)]
-fn kick_drift_pack_chunk(
+fn kick_drift_pack_chunk<T: Friction>(
     x: &mut [V3],
     v: &mut [V3],
     w: &mut [V3],
@@ -1155,15 +1159,15 @@ fn kick_drift_pack_chunk(
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
-        return unsafe { kdp_avx2(x, v, w, a, b, s, h, dt, lim) };
+        return unsafe { kdp_avx2::<T>(x, v, w, a, b, s, h, dt, lim) };
     }
-    kdp(x, v, w, a, b, s, h, dt, lim)
+    kdp::<T>(x, v, w, a, b, s, h, dt, lim)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
-fn kdp_avx2(
+fn kdp_avx2<T: Friction>(
     x: &mut [V3],
     v: &mut [V3],
     w: &mut [V3],
@@ -1174,12 +1178,12 @@ fn kdp_avx2(
     dt: f64,
     lim: f64,
 ) -> bool {
-    kdp(x, v, w, a, b, s, h, dt, lim)
+    kdp::<T>(x, v, w, a, b, s, h, dt, lim)
 }
 
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn kdp(
+fn kdp<T: Friction>(
     x: &mut [V3],
     v: &mut [V3],
     w: &mut [V3],
@@ -1206,11 +1210,20 @@ fn kdp(
         let vn = v[l] + f[l] * (h * im[l]);
         v[l] = vn;
         x[l] += vn * dt;
-        w[l] += t[l] * (h * ii[l]);
+        // without friction there are no torques: spins never change
+        if T::FRICTIONAL {
+            w[l] += t[l] * (h * ii[l]);
+        }
         let xi = x[l];
         moved |= (xi - widen(&xb[l])).norm_squared() > lim;
         a[l] = xr_record(&xi, rad[l]);
-        b[l] = kin_record(&vn, &w[l], &f[l], &t[l], im[l], ii[l], h, rad[l]);
+        b[l] = if T::FRICTIONAL {
+            kin_record(&vn, &w[l], &f[l], &t[l], im[l], ii[l], h, rad[l])
+        } else {
+            let vp = vn + (h * im[l]) * f[l];
+            let wl = w[l];
+            [vp.x, vp.y, vp.z, im[l], wl.x, wl.y, wl.z, rad[l]]
+        };
     }
     moved
 }

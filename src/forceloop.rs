@@ -294,6 +294,7 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
     let mut p = PairIn {
         d: zv,
         r2: z,
+        rs: z,
         ri: z,
         rj: z,
         imi: z,
@@ -320,15 +321,14 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             for l in 0..L {
                 let c = cl(l);
                 let [i, j, _, _] = sc.ids[c].map(|v| v as usize);
-                let [dx, dy, dz, _] = sc.rec[c];
+                let [dx, dy, dz, rs] = sc.rec[c];
+                p.rs.0[l] = rs;
                 p.d.x.0[l] = dx;
                 p.d.y.0[l] = dy;
                 p.d.z.0[l] = dz;
                 // the squared distance of pass 1, recomputed (same operations, same bits)
                 p.r2.0[l] = dx * dx + dy * dy + dz * dz;
                 let (ki, kj) = (&s.kin[i], &s.kin[j]);
-                p.ri.0[l] = ki[7];
-                p.rj.0[l] = kj[7];
                 p.imi.0[l] = ki[3];
                 p.imj.0[l] = kj[3];
                 p.vi.x.0[l] = ki[0];
@@ -338,6 +338,8 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
                 p.vj.y.0[l] = kj[1];
                 p.vj.z.0[l] = kj[2];
                 if T::FRICTIONAL {
+                    p.ri.0[l] = ki[7];
+                    p.rj.0[l] = kj[7];
                     p.wi.x.0[l] = ki[4];
                     p.wi.y.0[l] = ki[5];
                     p.wi.z.0[l] = ki[6];
@@ -643,9 +645,7 @@ mod avx {
             // otherwise come from the last-level cache one contact at a time)
             for &j in &js {
                 // SAFETY: a prefetch of an address in the array
-                unsafe {
-                    _mm_prefetch::<_MM_HINT_T0>(s.kin.as_ptr().add(j as usize) as *const i8)
-                };
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(s.kin.as_ptr().add(j as usize) as *const i8) };
             }
             let [dx, dy, dz, rs] = transpose(rec[0], rec[1], rec[2], rec[3]);
             let r2 = _mm256_add_pd(
@@ -734,7 +734,9 @@ mod avx {
     ) {
         unsafe {
             let r = [0, 1, 2, 3].map(|l| ld(sc.rec.get_unchecked(cl(l)).as_ptr()));
-            let [dx, dy, dz, _] = transpose(r[0], r[1], r[2], r[3]);
+            let [dx, dy, dz, rs] = transpose(r[0], r[1], r[2], r[3]);
+            // R_i + R_j as pass 1 added them
+            p.rs = ln(rs);
             p.d.x = ln(dx);
             p.d.y = ln(dy);
             p.d.z = ln(dz);
@@ -764,16 +766,15 @@ mod avx {
             p.vj.y = ln(vy);
             p.vj.z = ln(vz);
             p.imj = ln(im);
-            let [wx, wy, wz, r] = hi(ci);
-            p.ri = ln(r);
             if T::FRICTIONAL {
+                // spins and radii only matter with friction (torques, surface velocity)
+                let [wx, wy, wz, r] = hi(ci);
+                p.ri = ln(r);
                 p.wi.x = ln(wx);
                 p.wi.y = ln(wy);
                 p.wi.z = ln(wz);
-            }
-            let [wx, wy, wz, r] = hi(cj);
-            p.rj = ln(r);
-            if T::FRICTIONAL {
+                let [wx, wy, wz, r] = hi(cj);
+                p.rj = ln(r);
                 p.wj.x = ln(wx);
                 p.wj.y = ln(wy);
                 p.wj.z = ln(wz);

@@ -211,6 +211,9 @@ pub struct PairIn<const L: usize> {
     /// Branch vector x_i - x_j (with its periodic image) and its squared length.
     pub d: V<L>,
     pub r2: Ln<L>,
+    /// R_i + R_j.
+    pub rs: Ln<L>,
+    /// R_i and R_j (read only with friction).
     pub ri: Ln<L>,
     pub rj: Ln<L>,
     pub imi: Ln<L>,
