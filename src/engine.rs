@@ -229,6 +229,9 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Total energy at the first guard check (closed systems only).
     energy_ref: Option<f64>,
     forces_valid: bool,
+    /// The last evaluation left its cross-chunk pass and final half-kick to the next step's
+    /// first pass (plain NVE inside `run`; see `step_once`).
+    cross_pending: bool,
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
@@ -330,6 +333,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross_stats: Vec::new(),
             energy_ref: None,
             forces_valid: false,
+            cross_pending: false,
         };
         e.rebuild();
         e.compute_forces_setup();
@@ -559,13 +563,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Advance `n` steps.
     pub fn run(&mut self, n: u64) -> Result<()> {
         self.ensure_forces()?;
-        for _ in 0..n {
-            self.step_once()?;
+        for k in 0..n {
+            self.step_once(k + 1 < n)?;
         }
         Ok(())
     }
 
-    fn step_once(&mut self) -> Result<()> {
+    /// One step. `more`: another step of the same `run` follows, so (plain NVE, no
+    /// statistics asked for, no guard check due) the cross-chunk pass and the final half-kick
+    /// can ride on the next step's first pass: one sweep over the particles fewer per step,
+    /// the same arithmetic in the same order (the same bits). Nothing outside `run` sees the
+    /// deferred state: the last step of a run, a step whose state a guard reads and a failing
+    /// step complete it.
+    fn step_once(&mut self, more: bool) -> Result<()> {
         let dt = self.dt;
         let t0 = Instant::now();
         // one pass over the particles: (for plain NVE) the half-kick and drift, then the
@@ -586,7 +596,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let wf_old = self.diag.wall_force;
         // plain NVE: the final half-kick rides on the force loop's last pass
         let kick = if D::PLAIN_NVE { 0.5 * dt } else { 0.0 };
-        self.evaluate(dt, kick);
+        let check_due = (self.step + 1).is_multiple_of(self.guards.check_every);
+        let defer = D::PLAIN_NVE && more && !check_due;
+        self.evaluate(dt, kick, defer);
         if W::ON {
             for (w, imp) in self.wall_impulse.iter_mut().enumerate() {
                 *imp += 0.5 * dt * (wf_old[w] + self.diag.wall_force[w]);
@@ -604,7 +616,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         tm.forces += (t3 - t2).as_secs_f64();
         self.step += 1;
         self.time += dt;
-        self.check_overlap()?;
+        if let Err(e) = self.check_overlap() {
+            self.complete_step();
+            return Err(e);
+        }
         if self.step.is_multiple_of(self.guards.check_every) {
             self.check_finite()?;
             if D::CLOSED && !G::ON {
@@ -669,35 +684,53 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let ch = chunk_size(self.p.len());
         let n = self.p.len();
         if self.nl.x_build.len() != n {
+            self.complete_step();
             crate::domain::nve_initial(&mut self.p, self.dt);
             return true;
         }
+        // the last step's deferred cross pass and final half-kick, particle by particle
+        // ahead of this step's half-kick
+        let pending = std::mem::take(&mut self.cross_pending);
         let dt = self.dt;
         let h = 0.5 * dt;
         let lim = self.nl.moved_limit2();
         let xb = &self.nl.x_build;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
+        let nl = &self.nl;
+        let (cross, cstat, cidx) = (&self.cross, &self.cross_stats, &self.cross_idx);
         let p = &mut self.p;
-        let (f, t) = (&p.force, &p.torque);
         let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
         p.x.par_chunks_mut(ch)
             .zip(p.v.par_chunks_mut(ch))
             .zip(p.omega.par_chunks_mut(ch))
+            .zip(p.force.par_chunks_mut(ch))
+            .zip(p.torque.par_chunks_mut(ch))
             .zip(self.xr.par_chunks_mut(ch))
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
-            .map(|(c, ((((x, v), w), a), b))| {
+            .map(|(c, ((((((x, v), w), f), t), a), b))| {
                 let r = c * ch..c * ch + x.len();
                 let src = KickSrc {
-                    f: &f[r.clone()],
-                    t: &t[r.clone()],
                     im: &im[r.clone()],
                     ii: &ii[r.clone()],
                     rad: &rad[r.clone()],
-                    xb: &xb[r],
+                    xb: &xb[r.clone()],
                 };
-                kick_drift_pack_chunk::<T>(x, v, w, a, b, &src, h, dt, lim)
+                let cx = CrossSrc {
+                    cs: &nl.cross_start[r.start..r.end + 1],
+                    slot: &nl.cross_slot,
+                    src: &nl.cross_src,
+                    cidx,
+                    cross,
+                    cstat,
+                    rad: &rad[r.clone()],
+                    im: &im[r.clone()],
+                    ii: &ii[r],
+                    kick: h,
+                };
+                let pend = if pending { Some(&cx) } else { None };
+                kick_drift_pack_chunk::<T>(x, v, w, a, b, f, t, &src, pend, h, dt, lim)
             })
             .reduce(|| false, |a, b| a || b)
     }
@@ -835,7 +868,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
         self.pack();
-        self.evaluate(0.0, 0.0);
+        self.evaluate(0.0, 0.0, false);
+    }
+
+    /// Finish a step whose cross-chunk pass and final half-kick were deferred.
+    fn complete_step(&mut self) {
+        if self.cross_pending {
+            self.cross_pending = false;
+            self.cross_pass::<false>(0.5 * self.dt);
+        }
     }
 
     /// Forces from the packed records (`pack` or `kick_drift_pack` must have run). `hist_dt`: the
@@ -848,18 +889,25 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// and gravity are added by the owner. Phase 2 adds the cross slots to their second
     /// particles in list order. Every sum has one order fixed by the list.
     /// `kick`: 0, or dt/2 to apply the final half-kick of a plain NVE step in the last pass.
-    fn evaluate(&mut self, hist_dt: f64, kick: f64) {
+    /// `defer`: leave the cross-chunk pass and the final half-kick to the next step's first
+    /// pass (ignored when statistics are asked for).
+    fn evaluate(&mut self, hist_dt: f64, kick: f64, defer: bool) {
         // the statistics and virial paths are compiled separately, so the plain step carries
         // none of their code (nor its register pressure)
         match (self.want_stats, D::NEEDS_VIRIAL || self.want_virial) {
-            (false, false) => self.evaluate_with::<false, false>(hist_dt, kick),
-            (false, true) => self.evaluate_with::<false, true>(hist_dt, kick),
-            (true, false) => self.evaluate_with::<true, false>(hist_dt, kick),
-            (true, true) => self.evaluate_with::<true, true>(hist_dt, kick),
+            (false, false) => self.evaluate_with::<false, false>(hist_dt, kick, defer),
+            (false, true) => self.evaluate_with::<false, true>(hist_dt, kick, defer),
+            (true, false) => self.evaluate_with::<true, false>(hist_dt, kick, false),
+            (true, true) => self.evaluate_with::<true, true>(hist_dt, kick, false),
         }
     }
 
-    fn evaluate_with<const STATS: bool, const VIR: bool>(&mut self, hist_dt: f64, kick: f64) {
+    fn evaluate_with<const STATS: bool, const VIR: bool>(
+        &mut self,
+        hist_dt: f64,
+        kick: f64,
+        defer: bool,
+    ) {
         let ch = chunk_size(self.p.len());
         let tstart = Instant::now();
         let dt = hist_dt;
@@ -971,48 +1019,61 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
         }
 
-        // Phase 2: cross pairs in contact onto their second particles, in list order; for a
-        // plain NVE domain in a time step, the final half-kick in the same pass (the forces of
-        // particle i are complete once its cross pairs are added).
-        if nl.n_cross() > 0 || kick > 0.0 {
-            let cross = &self.cross;
-            let cstat = &self.cross_stats;
-            let cidx = &self.cross_idx;
-            let cs = &nl.cross_start;
-            let slot = &nl.cross_slot;
-            let mut ps_pieces = stat_pieces(&mut self.pstats, want_stats, ch, nchunks);
-            let p = &mut self.p;
-            let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
-            p.force
-                .par_chunks_mut(ch)
-                .zip(p.torque.par_chunks_mut(ch))
-                .zip(p.v.par_chunks_mut(ch))
-                .zip(p.omega.par_chunks_mut(ch))
-                .zip(ps_pieces.par_drain(..))
-                .enumerate()
-                .for_each(|(c, ((((fo, to), vo), wo), ps))| {
-                    let r = c * ch..c * ch + fo.len();
-                    let src = CrossSrc {
-                        cs: &cs[r.start..r.end + 1],
-                        slot,
-                        src: &nl.cross_src,
-                        cidx,
-                        cross,
-                        cstat,
-                        rad: &rad[r.clone()],
-                        im: &im[r.clone()],
-                        ii: &ii[r],
-                        kick,
-                    };
-                    cross_kick_chunk::<STATS, T>(fo, to, vo, wo, ps, &src);
-                });
-        }
         self.diag = diag;
+        if defer && kick > 0.0 && !STATS {
+            self.cross_pending = true;
+        } else {
+            self.cross_pass::<STATS>(kick);
+        }
         self.forces_valid = true;
         self.want_stats = false;
         let te = Instant::now();
         self.timers.pair_phase += (tp - tstart).as_secs_f64();
         self.timers.gather_phase += (te - tp).as_secs_f64();
+    }
+
+    /// Phase 2: cross pairs in contact onto their second particles, in list order; for a
+    /// plain NVE domain in a time step (`kick` = dt/2), the final half-kick in the same pass
+    /// (the forces of particle i are complete once its cross pairs are added).
+    fn cross_pass<const STATS: bool>(&mut self, kick: f64) {
+        let nl = &self.nl;
+        if nl.n_cross() == 0 && kick == 0.0 {
+            return;
+        }
+        let n = self.p.len();
+        let ch = chunk_size(n);
+        let nchunks = n.div_ceil(ch);
+        let cross = &self.cross;
+        let cstat = &self.cross_stats;
+        let cidx = &self.cross_idx;
+        let cs = &nl.cross_start;
+        let slot = &nl.cross_slot;
+        let mut ps_pieces = stat_pieces(&mut self.pstats, STATS, ch, nchunks);
+        let p = &mut self.p;
+        let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
+        p.force
+            .par_chunks_mut(ch)
+            .zip(p.torque.par_chunks_mut(ch))
+            .zip(p.v.par_chunks_mut(ch))
+            .zip(p.omega.par_chunks_mut(ch))
+            .zip(ps_pieces.par_drain(..))
+            .enumerate()
+            .for_each(|(c, ((((fo, to), vo), wo), ps))| {
+                let r = c * ch..c * ch + fo.len();
+                let src = CrossSrc {
+                    cs: &cs[r.start..r.end + 1],
+                    slot,
+                    src: &nl.cross_src,
+                    cidx,
+                    cross,
+                    cstat,
+                    rad: &rad[r.clone()],
+                    im: &im[r.clone()],
+                    ii: &ii[r],
+                    kick,
+                };
+                cross_kick_chunk::<STATS, T>(fo, to, vo, wo, ps, &src);
+            });
     }
 }
 
@@ -1098,34 +1159,60 @@ fn cross_kick<const STATS: bool, T: Friction>(
     s: &CrossSrc,
 ) {
     let n = fo.len();
-    let (to, vo, wo) = (&mut to[..n], &mut vo[..n], &mut wo[..n]);
-    let (cs, rad, im, ii) = (&s.cs[..n + 1], &s.rad[..n], &s.im[..n], &s.ii[..n]);
+    assert!(to.len() == n && vo.len() == n && wo.len() == n && s.cs.len() == n + 1);
+    assert!(s.rad.len() == n && s.im.len() == n && s.ii.len() == n);
+    assert!(!STATS || ps.len() == n);
     for l in 0..n {
-        let (a, b) = (cs[l] as usize, cs[l + 1] as usize);
+        // SAFETY: l < n, the length of every per-particle slice (asserted above)
+        unsafe { cross_one::<STATS, T>(l, fo, to, vo, wo, ps, s) };
+    }
+}
+
+/// Phase 2 for particle l of a chunk: its cross pairs, then (`kick` > 0) its final half-kick.
+///
+/// # Safety
+/// l < the length of fo, to, vo, wo, s.rad, s.im, s.ii (and ps with STATS); l + 1 < s.cs.len().
+#[inline(always)]
+unsafe fn cross_one<const STATS: bool, T: Friction>(
+    l: usize,
+    fo: &mut [V3],
+    to: &mut [V3],
+    vo: &mut [V3],
+    wo: &mut [V3],
+    ps: &mut [[f64; 10]],
+    s: &CrossSrc,
+) {
+    unsafe {
+        let (a, b) = (
+            *s.cs.get_unchecked(l) as usize,
+            *s.cs.get_unchecked(l + 1) as usize,
+        );
+        let fl = fo.get_unchecked_mut(l);
+        let tl = to.get_unchecked_mut(l);
         if a < b {
-            let mut f = fo[l];
-            let mut t = to[l];
+            let mut f = *fl;
+            let mut t = *tl;
             for (&sl, &src) in s.slot[a..b].iter().zip(&s.src[a..b]) {
                 let e = s.cidx[sl as usize];
                 if e != u32::MAX {
                     let o = &s.cross[src as usize][e as usize];
                     f -= o.f;
                     if T::FRICTIONAL {
-                        t += rad[l] * o.q;
+                        t += *s.rad.get_unchecked(l) * o.q;
                     }
                     if STATS {
                         add10(&mut ps[l], &s.cstat[src as usize][e as usize]);
                     }
                 }
             }
-            fo[l] = f;
-            to[l] = t;
+            *fl = f;
+            *tl = t;
         }
         if s.kick > 0.0 {
             // the arithmetic of nve_final
-            vo[l] += fo[l] * (s.kick * im[l]);
+            *vo.get_unchecked_mut(l) += *fl * (s.kick * *s.im.get_unchecked(l));
             if T::FRICTIONAL {
-                wo[l] += to[l] * (s.kick * ii[l]);
+                *wo.get_unchecked_mut(l) += *tl * (s.kick * *s.ii.get_unchecked(l));
             }
         }
     }
@@ -1133,8 +1220,6 @@ fn cross_kick<const STATS: bool, T: Friction>(
 
 /// What the fused half-kick, drift and packing pass reads of one chunk.
 struct KickSrc<'a> {
-    f: &'a [V3],
-    t: &'a [V3],
     im: &'a [f64],
     ii: &'a [f64],
     rad: &'a [f64],
@@ -1151,7 +1236,10 @@ fn kick_drift_pack_chunk<T: Friction>(
     w: &mut [V3],
     a: &mut [[f64; 4]],
     b: &mut [[f64; 8]],
+    f: &mut [V3],
+    t: &mut [V3],
     s: &KickSrc,
+    pend: Option<&CrossSrc>,
     h: f64,
     dt: f64,
     lim: f64,
@@ -1159,9 +1247,9 @@ fn kick_drift_pack_chunk<T: Friction>(
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
-        return unsafe { kdp_avx2::<T>(x, v, w, a, b, s, h, dt, lim) };
+        return unsafe { kdp_avx2::<T>(x, v, w, a, b, f, t, s, pend, h, dt, lim) };
     }
-    kdp::<T>(x, v, w, a, b, s, h, dt, lim)
+    kdp::<T>(x, v, w, a, b, f, t, s, pend, h, dt, lim)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1173,12 +1261,15 @@ fn kdp_avx2<T: Friction>(
     w: &mut [V3],
     a: &mut [[f64; 4]],
     b: &mut [[f64; 8]],
+    f: &mut [V3],
+    t: &mut [V3],
     s: &KickSrc,
+    pend: Option<&CrossSrc>,
     h: f64,
     dt: f64,
     lim: f64,
 ) -> bool {
-    kdp::<T>(x, v, w, a, b, s, h, dt, lim)
+    kdp::<T>(x, v, w, a, b, f, t, s, pend, h, dt, lim)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -1189,7 +1280,10 @@ fn kdp<T: Friction>(
     w: &mut [V3],
     a: &mut [[f64; 4]],
     b: &mut [[f64; 8]],
+    f: &mut [V3],
+    t: &mut [V3],
     s: &KickSrc,
+    pend: Option<&CrossSrc>,
     h: f64,
     dt: f64,
     lim: f64,
@@ -1197,16 +1291,18 @@ fn kdp<T: Friction>(
     let n = x.len();
     // equal lengths let the compiler drop the bounds checks
     let (v, w, a, b) = (&mut v[..n], &mut w[..n], &mut a[..n], &mut b[..n]);
-    let (f, t, im, ii, rad, xb) = (
-        &s.f[..n],
-        &s.t[..n],
-        &s.im[..n],
-        &s.ii[..n],
-        &s.rad[..n],
-        &s.xb[..n],
-    );
+    let (f, t) = (&mut f[..n], &mut t[..n]);
+    let (im, ii, rad, xb) = (&s.im[..n], &s.ii[..n], &s.rad[..n], &s.xb[..n]);
+    if let Some(cx) = pend {
+        assert!(cx.cs.len() == n + 1 && cx.rad.len() == n && cx.im.len() == n);
+        assert!(cx.ii.len() == n);
+    }
     let mut moved = false;
     for l in 0..n {
+        if let Some(cx) = pend {
+            // SAFETY: l < n, the length of every per-particle slice (asserted above)
+            unsafe { cross_one::<false, T>(l, f, t, v, w, &mut [], cx) };
+        }
         let vn = v[l] + f[l] * (h * im[l]);
         v[l] = vn;
         x[l] += vn * dt;

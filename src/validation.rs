@@ -393,6 +393,47 @@ fn one_and_two_threads_bitwise_identical() {
 }
 
 #[test]
+fn deferred_cross_pass_changes_no_bits() {
+    // Inside one run the cross-chunk pass and the final half-kick ride on the next step's
+    // first pass; run(600) must equal 600 x run(1), which never defers.
+    let mk = || {
+        let l = 12.0;
+        let p = gas(0.35, l, 5, SizeDist::Uniform(0.9, 1.1));
+        let law = LawParams::new(1e5, 0.8, 0.5);
+        let e: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
+            p,
+            law,
+            OrthoBox::periodic_cube(l).unwrap(),
+            NoWalls,
+            NoBody,
+            None,
+            0.2,
+        )
+        .unwrap();
+        e
+    };
+    let (mut a, mut b) = (mk(), mk());
+    assert!(
+        a.nl.n_cross() > 0 || a.p.len() > 256,
+        "needs cross pairs to test anything"
+    );
+    a.run(600).unwrap();
+    for _ in 0..600 {
+        b.run(1).unwrap();
+    }
+    assert!(a.diag.contacts > 0);
+    for (x, y) in a.p.x.iter().zip(&b.p.x) {
+        assert_eq!(x.as_slice(), y.as_slice());
+    }
+    for (x, y) in a.p.v.iter().zip(&b.p.v) {
+        assert_eq!(x.as_slice(), y.as_slice());
+    }
+    for (x, y) in a.p.omega.iter().zip(&b.p.omega) {
+        assert_eq!(x.as_slice(), y.as_slice());
+    }
+}
+
+#[test]
 fn avx2_and_baseline_paths_bitwise_identical() {
     // The force loop runs with AVX2 where the CPU has it and with baseline x86-64 otherwise;
     // both must give the same bits (same IEEE operations, same order). Without AVX2 on this
