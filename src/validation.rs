@@ -433,21 +433,77 @@ fn deferred_cross_pass_changes_no_bits() {
     }
 }
 
+/// Positions, velocities and (one statistics step) the per-particle stress records of a
+/// walled Hertz channel with gravity, and positions of a frictionless periodic packing.
+fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Vec<V3>) {
+    use crate::contact::{Frictionless, Hertz};
+    use crate::engine::{Gravity, Plane, PlaneWalls};
+    let l = 8.0;
+    let mut p = gas(0.35, l, 9, SizeDist::Uniform(0.9, 1.1));
+    for x in p.x.iter_mut() {
+        x.x = 0.6 + x.x * (6.8 / 8.0);
+    }
+    let law = LawParams::new(1e5, 0.8, 0.5);
+    let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
+    let walls = PlaneWalls::<Hertz, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
+    let mut s = Engine::new(
+        p,
+        law,
+        bx,
+        walls,
+        Gravity(V3::new(-5.0, 0.0, 0.0)),
+        None,
+        0.2,
+    )
+    .unwrap();
+    s.run(1500).unwrap();
+    s.want_virial = true;
+    s.want_stats = true;
+    s.run(1).unwrap();
+    let p2 = gas(0.35, l, 3, SizeDist::Uniform(0.9, 1.1));
+    let mut f: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> = Engine::new(
+        p2,
+        LawParams::new(1e5, 0.8, 0.0),
+        OrthoBox::periodic_cube(l).unwrap(),
+        NoWalls,
+        NoBody,
+        None,
+        0.2,
+    )
+    .unwrap();
+    f.run(1500).unwrap();
+    (
+        s.p.x.clone(),
+        s.p.v.clone(),
+        s.pstats.clone(),
+        f.p.x.clone(),
+    )
+}
+
 #[test]
 fn avx2_and_baseline_paths_bitwise_identical() {
     // The force loop runs with AVX2 where the CPU has it and with baseline x86-64 otherwise;
-    // both must give the same bits (same IEEE operations, same order). Without AVX2 on this
-    // CPU both runs take the baseline path and the test checks nothing more than determinism.
+    // both must give the same bits (same IEEE operations, same order). One test only: the
+    // switch is global, and a second test flipping it concurrently would blur the check.
+    // Without AVX2 on this CPU both runs take the baseline path.
     let wide = crate::lanes::wide();
     crate::lanes::set_wide(false);
-    let a = dense_packing_run(2);
+    let a = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
     crate::lanes::set_wide(true);
-    let b = dense_packing_run(2);
+    let b = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
     crate::lanes::set_wide(wide);
-    assert_eq!(a.len(), b.len());
-    for (x, y) in a.iter().zip(&b) {
-        assert_eq!(x.as_slice(), y.as_slice());
-    }
+    let same = |u: &[V3], v: &[V3]| {
+        assert_eq!(u.len(), v.len());
+        for (x, y) in u.iter().zip(v) {
+            assert_eq!(x.as_slice(), y.as_slice());
+        }
+    };
+    same(&a.0, &b.0);
+    same(&a.1 .0, &b.1 .0);
+    same(&a.1 .1, &b.1 .1);
+    assert!(a.1 .2.iter().any(|r| r.iter().any(|&v| v != 0.0)));
+    assert_eq!(a.1 .2, b.1 .2);
+    same(&a.1 .3, &b.1 .3);
 }
 
 #[test]
