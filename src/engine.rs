@@ -730,7 +730,20 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     kick: h,
                 };
                 let pend = if pending { Some(&cx) } else { None };
-                kick_drift_pack_chunk::<T>(x, v, w, a, b, f, t, &src, pend, h, dt, lim)
+                kick_drift_pack_chunk::<T>(KickChunk {
+                    x,
+                    v,
+                    w,
+                    f,
+                    t,
+                    a,
+                    b,
+                    s: &src,
+                    pend,
+                    h,
+                    dt,
+                    lim,
+                })
             })
             .reduce(|| false, |a, b| a || b)
     }
@@ -1072,7 +1085,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     ii: &ii[r],
                     kick,
                 };
-                cross_kick_chunk::<STATS, T>(fo, to, vo, wo, ps, &src);
+                cross_kick_chunk::<STATS, T>(CrossChunk {
+                    fo,
+                    to,
+                    vo,
+                    wo,
+                    ps,
+                    s: &src,
+                });
             });
     }
 }
@@ -1117,47 +1137,44 @@ struct CrossSrc<'a> {
     kick: f64,
 }
 
+/// One chunk's slices for phase 2 (force, torque, velocity, spin, statistics).
+struct CrossChunk<'a, 'b> {
+    fo: &'a mut [V3],
+    to: &'a mut [V3],
+    vo: &'a mut [V3],
+    wo: &'a mut [V3],
+    ps: &'a mut [[f64; 10]],
+    s: &'b CrossSrc<'b>,
+}
+
 /// Phase 2 for one chunk: the cross pairs in contact onto their second particles, in list
 /// order, then (plain NVE in a step, `kick` > 0) the final half-kick; AVX2 where the CPU has
 /// it (the same bits either way).
-fn cross_kick_chunk<const STATS: bool, T: Friction>(
-    fo: &mut [V3],
-    to: &mut [V3],
-    vo: &mut [V3],
-    wo: &mut [V3],
-    ps: &mut [[f64; 10]],
-    s: &CrossSrc,
-) {
+fn cross_kick_chunk<const STATS: bool, T: Friction>(k: CrossChunk) {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
-        return unsafe { cross_kick_avx2::<STATS, T>(fo, to, vo, wo, ps, s) };
+        return unsafe { cross_kick_avx2::<STATS, T>(k) };
     }
-    cross_kick::<STATS, T>(fo, to, vo, wo, ps, s)
+    cross_kick::<STATS, T>(k)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn cross_kick_avx2<const STATS: bool, T: Friction>(
-    fo: &mut [V3],
-    to: &mut [V3],
-    vo: &mut [V3],
-    wo: &mut [V3],
-    ps: &mut [[f64; 10]],
-    s: &CrossSrc,
-) {
-    cross_kick::<STATS, T>(fo, to, vo, wo, ps, s)
+fn cross_kick_avx2<const STATS: bool, T: Friction>(k: CrossChunk) {
+    cross_kick::<STATS, T>(k)
 }
 
 #[inline(always)]
-fn cross_kick<const STATS: bool, T: Friction>(
-    fo: &mut [V3],
-    to: &mut [V3],
-    vo: &mut [V3],
-    wo: &mut [V3],
-    ps: &mut [[f64; 10]],
-    s: &CrossSrc,
-) {
+fn cross_kick<const STATS: bool, T: Friction>(k: CrossChunk) {
+    let CrossChunk {
+        fo,
+        to,
+        vo,
+        wo,
+        ps,
+        s,
+    } = k;
     let n = fo.len();
     assert!(to.len() == n && vo.len() == n && wo.len() == n && s.cs.len() == n + 1);
     assert!(s.rad.len() == n && s.im.len() == n && s.ii.len() == n);
@@ -1226,68 +1243,59 @@ struct KickSrc<'a> {
     xb: &'a [[f32; 3]],
 }
 
+/// One chunk's slices for the fused half-kick, drift and packing pass, and what it reads.
+struct KickChunk<'a, 'b> {
+    x: &'a mut [V3],
+    v: &'a mut [V3],
+    w: &'a mut [V3],
+    f: &'a mut [V3],
+    t: &'a mut [V3],
+    /// The packed (x, R) and velocity records it writes.
+    a: &'a mut [[f64; 4]],
+    b: &'a mut [[f64; 8]],
+    s: &'b KickSrc<'b>,
+    /// The last step's deferred cross pass and final half-kick, if any.
+    pend: Option<&'b CrossSrc<'b>>,
+    h: f64,
+    dt: f64,
+    /// Squared half-skin: a larger displacement since the build asks for a rebuild.
+    lim: f64,
+}
+
 /// Half-kick, drift, displacement check and step records of one chunk (plain NVE), with AVX2
 /// where the CPU has it (elementwise arithmetic: the same bits either way). Returns whether a
 /// particle moved more than half the skin since the last build.
-#[allow(clippy::too_many_arguments)]
-fn kick_drift_pack_chunk<T: Friction>(
-    x: &mut [V3],
-    v: &mut [V3],
-    w: &mut [V3],
-    a: &mut [[f64; 4]],
-    b: &mut [[f64; 8]],
-    f: &mut [V3],
-    t: &mut [V3],
-    s: &KickSrc,
-    pend: Option<&CrossSrc>,
-    h: f64,
-    dt: f64,
-    lim: f64,
-) -> bool {
+fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> bool {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
-        return unsafe { kdp_avx2::<T>(x, v, w, a, b, f, t, s, pend, h, dt, lim) };
+        return unsafe { kdp_avx2::<T>(k) };
     }
-    kdp::<T>(x, v, w, a, b, f, t, s, pend, h, dt, lim)
+    kdp::<T>(k)
 }
 
 #[cfg(target_arch = "x86_64")]
-#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
-fn kdp_avx2<T: Friction>(
-    x: &mut [V3],
-    v: &mut [V3],
-    w: &mut [V3],
-    a: &mut [[f64; 4]],
-    b: &mut [[f64; 8]],
-    f: &mut [V3],
-    t: &mut [V3],
-    s: &KickSrc,
-    pend: Option<&CrossSrc>,
-    h: f64,
-    dt: f64,
-    lim: f64,
-) -> bool {
-    kdp::<T>(x, v, w, a, b, f, t, s, pend, h, dt, lim)
+fn kdp_avx2<T: Friction>(k: KickChunk) -> bool {
+    kdp::<T>(k)
 }
 
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn kdp<T: Friction>(
-    x: &mut [V3],
-    v: &mut [V3],
-    w: &mut [V3],
-    a: &mut [[f64; 4]],
-    b: &mut [[f64; 8]],
-    f: &mut [V3],
-    t: &mut [V3],
-    s: &KickSrc,
-    pend: Option<&CrossSrc>,
-    h: f64,
-    dt: f64,
-    lim: f64,
-) -> bool {
+fn kdp<T: Friction>(k: KickChunk) -> bool {
+    let KickChunk {
+        x,
+        v,
+        w,
+        f,
+        t,
+        a,
+        b,
+        s,
+        pend,
+        h,
+        dt,
+        lim,
+    } = k;
     let n = x.len();
     // equal lengths let the compiler drop the bounds checks
     let (v, w, a, b) = (&mut v[..n], &mut w[..n], &mut a[..n], &mut b[..n]);

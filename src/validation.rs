@@ -437,29 +437,8 @@ fn deferred_cross_pass_changes_no_bits() {
 /// walled Hertz channel with gravity, and positions of a frictionless periodic packing.
 fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Vec<V3>) {
     use crate::contact::{Frictionless, Hertz};
-    use crate::engine::{Gravity, Plane, PlaneWalls};
     let l = 8.0;
-    let mut p = gas(0.35, l, 9, SizeDist::Uniform(0.9, 1.1));
-    for x in p.x.iter_mut() {
-        x.x = 0.6 + x.x * (6.8 / 8.0);
-    }
-    let law = LawParams::new(1e5, 0.8, 0.5);
-    let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
-    let walls = PlaneWalls::<Hertz, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
-    let mut s = Engine::new(
-        p,
-        law,
-        bx,
-        walls,
-        Gravity(V3::new(-5.0, 0.0, 0.0)),
-        None,
-        0.2,
-    )
-    .unwrap();
-    s.run(1500).unwrap();
-    s.want_virial = true;
-    s.want_stats = true;
-    s.run(1).unwrap();
+    let s = walled_channel::<Hertz>(l, 1500);
     let p2 = gas(0.35, l, 3, SizeDist::Uniform(0.9, 1.1));
     let mut f: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> = Engine::new(
         p2,
@@ -574,10 +553,13 @@ fn unstable_integration_stops_with_a_clear_error() {
     assert!(s.p.x.iter().all(|x| x.iter().all(|c| c.is_finite())) || msg.contains("NaN"));
 }
 
-#[test]
-fn per_particle_stress_sums_to_the_virial_and_walls_count() {
+/// A gas between walls at x = 0 and x = l with gravity towards the first, run `steps` steps,
+/// then one step with the virial and the per-particle statistics.
+fn walled_channel<F: Form>(
+    l: f64,
+    steps: u64,
+) -> Engine<F, Coulomb, OrthoBox, crate::engine::PlaneWalls<F, Coulomb>, crate::engine::Gravity> {
     use crate::engine::{Gravity, Plane, PlaneWalls};
-    let l = 8.0;
     let mut p = gas(0.35, l, 9, SizeDist::Uniform(0.9, 1.1));
     // squeeze x into [0.6, 7.4] so some particles touch the walls at x = 0 and x = 8
     for x in p.x.iter_mut() {
@@ -585,7 +567,7 @@ fn per_particle_stress_sums_to_the_virial_and_walls_count() {
     }
     let law = LawParams::new(1e5, 0.8, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
-    let walls = PlaneWalls::<Hooke, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
+    let walls = PlaneWalls::<F, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
     let mut s = Engine::new(
         p,
         law,
@@ -596,10 +578,17 @@ fn per_particle_stress_sums_to_the_virial_and_walls_count() {
         0.2,
     )
     .unwrap();
-    s.run(3000).unwrap();
+    s.run(steps).unwrap();
     s.want_virial = true;
     s.want_stats = true;
     s.run(1).unwrap();
+    s
+}
+
+#[test]
+fn per_particle_stress_sums_to_the_virial_and_walls_count() {
+    let l = 8.0;
+    let s = walled_channel::<Hooke>(l, 3000);
     let mut tot = [0.0; 10];
     for st in &s.pstats {
         for k in 0..10 {
