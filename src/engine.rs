@@ -717,18 +717,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     rad: &rad[r.clone()],
                     xb: &xb[r.clone()],
                 };
-                let cx = CrossSrc {
-                    cs: &nl.cross_start[r.start..r.end + 1],
-                    slot: &nl.cross_slot,
-                    src: &nl.cross_src,
-                    cidx,
-                    cross,
-                    cstat,
-                    rad: &rad[r.clone()],
-                    im: &im[r.clone()],
-                    ii: &ii[r],
-                    kick: h,
-                };
+                let cx = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, h);
                 let pend = if pending { Some(&cx) } else { None };
                 kick_drift_pack_chunk::<T>(KickChunk {
                     x,
@@ -1059,8 +1048,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let cross = &self.cross;
         let cstat = &self.cross_stats;
         let cidx = &self.cross_idx;
-        let cs = &nl.cross_start;
-        let slot = &nl.cross_slot;
         let mut ps_pieces = stat_pieces(&mut self.pstats, STATS, ch, nchunks);
         let p = &mut self.p;
         let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
@@ -1073,18 +1060,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .enumerate()
             .for_each(|(c, ((((fo, to), vo), wo), ps))| {
                 let r = c * ch..c * ch + fo.len();
-                let src = CrossSrc {
-                    cs: &cs[r.start..r.end + 1],
-                    slot,
-                    src: &nl.cross_src,
-                    cidx,
-                    cross,
-                    cstat,
-                    rad: &rad[r.clone()],
-                    im: &im[r.clone()],
-                    ii: &ii[r],
-                    kick,
-                };
+                let src = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, kick);
                 cross_kick_chunk::<STATS, T>(CrossChunk {
                     fo,
                     to,
@@ -1135,6 +1111,33 @@ struct CrossSrc<'a> {
     im: &'a [f64],
     ii: &'a [f64],
     kick: f64,
+}
+
+impl<'a> CrossSrc<'a> {
+    /// The cross-pass inputs of the chunk of particles `r`: the list's cross slots, the
+    /// buffered cross forces and (R, 1/m, 1/I) per particle.
+    fn new(
+        nl: &'a NeighborList,
+        cross: &'a [Vec<PairOut>],
+        cstat: &'a [Vec<[f64; 10]>],
+        cidx: &'a [u32],
+        (rad, im, ii): (&'a [f64], &'a [f64], &'a [f64]),
+        r: std::ops::Range<usize>,
+        kick: f64,
+    ) -> Self {
+        CrossSrc {
+            cs: &nl.cross_start[r.start..r.end + 1],
+            slot: &nl.cross_slot,
+            src: &nl.cross_src,
+            cidx,
+            cross,
+            cstat,
+            rad: &rad[r.clone()],
+            im: &im[r.clone()],
+            ii: &ii[r],
+            kick,
+        }
+    }
 }
 
 /// One chunk's slices for phase 2 (force, torque, velocity, spin, statistics).

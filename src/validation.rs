@@ -392,27 +392,26 @@ fn one_and_two_threads_bitwise_identical() {
     }
 }
 
+/// A frictional gas (phi = 0.35) in a periodic cube of side l.
+fn periodic_gas(l: f64, seed: u64) -> Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> {
+    let p = gas(0.35, l, seed, SizeDist::Uniform(0.9, 1.1));
+    Engine::new(
+        p,
+        LawParams::new(1e5, 0.8, 0.5),
+        OrthoBox::periodic_cube(l).unwrap(),
+        NoWalls,
+        NoBody,
+        None,
+        0.2,
+    )
+    .unwrap()
+}
+
 #[test]
 fn deferred_cross_pass_changes_no_bits() {
     // Inside one run the cross-chunk pass and the final half-kick ride on the next step's
     // first pass; run(600) must equal 600 x run(1), which never defers.
-    let mk = || {
-        let l = 12.0;
-        let p = gas(0.35, l, 5, SizeDist::Uniform(0.9, 1.1));
-        let law = LawParams::new(1e5, 0.8, 0.5);
-        let e: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-            p,
-            law,
-            OrthoBox::periodic_cube(l).unwrap(),
-            NoWalls,
-            NoBody,
-            None,
-            0.2,
-        )
-        .unwrap();
-        e
-    };
-    let (mut a, mut b) = (mk(), mk());
+    let (mut a, mut b) = (periodic_gas(12.0, 5), periodic_gas(12.0, 5));
     assert!(
         a.nl.n_cross() > 0 || a.p.len() > 256,
         "needs cross pairs to test anything"
@@ -489,21 +488,7 @@ fn avx2_and_baseline_paths_bitwise_identical() {
 fn checkpoint_restart_is_bitwise_identical() {
     use crate::checkpoint::{Reader, Writer};
     let l = 8.0;
-    let mk = || {
-        let p = gas(0.35, l, 21, SizeDist::Uniform(0.9, 1.1));
-        let law = LawParams::new(1e5, 0.8, 0.5);
-        let s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-            p,
-            law,
-            OrthoBox::periodic_cube(l).unwrap(),
-            NoWalls,
-            NoBody,
-            None,
-            0.2,
-        )
-        .unwrap();
-        s
-    };
+    let mk = || periodic_gas(l, 21);
     let mut a = mk();
     a.run(700).unwrap();
     let mut b = mk();
