@@ -557,23 +557,40 @@ def part_shear(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
                    [pv[:, 4], pv[:, 5], pv[:, 2]]])
     p_l, tau_l = invariants(pt.mean(axis=2))
     p_ser = mean_se(pt[0, 0] / 3 + pt[1, 1] / 3 + pt[2, 2] / 3, every * core.dt)
+
+    def ratio_se(series: Array, dt_sample: float) -> float:
+        """SE (block averaging) of tau/p from a (samples, 3, 3) stress series: the SE of the
+        per-sample ratio, which the ratio of the means shares to first order."""
+        r = [(lambda pq: pq[1] / pq[0])(invariants(0.5 * (m + m.T))) for m in series]
+        return mean_se(np.asarray(r), dt_sample).se
+
+    gf_series = np.stack([[np.asarray(s[f"sigma_c_{i}{j}"][half:]) for j in "xyz"]
+                          for i in "xyz"]).transpose(2, 0, 1)
+    gf_ratio_se = ratio_se(gf_series, dts)
+    lmp_ratio_se = ratio_se(pt.transpose(2, 0, 1), every * core.dt)
     out = {
         "n": core.n, "cell_steps": steps, "cell_prep_seconds": t_prep,
         "shear_steps": a.shear_steps, "strain_lammps": rate * a.shear_steps * core.dt,
         "gf_shear_rate_gd": gd, "gf_shear_rate_gd_se": gd_se, "lammps_erate": rate,
         "gf_phi": phi, "gf_phi_se": phi_se, "phi_handoff": phi_now,
         "gf_p_c": p_c, "gf_tau_c_over_p_c": tau_c / p_c,
+        "gf_tau_c_over_p_c_se": gf_ratio_se,
         "lmp_p_c": p_l, "lmp_p_c_se": p_ser.se, "lmp_tau_c_over_p_c": tau_l / p_l,
+        "lmp_tau_c_over_p_c_se": lmp_ratio_se,
         "gf_particle_steps_per_s": gf_rate, "lmp_particle_steps_per_s": r["particle_steps_per_s"],
         "gf_state": cell.summary().get("state"),
     }  # fmt: skip
     print(f"\n== sheared dense packing, N = {core.n}: granflow stress-controlled cell "
           f"({steps} steps, state {out['gf_state']}), then LAMMPS fix deform xy erate "
           f"{rate:.4g} for {a.shear_steps} steps (strain {out['strain_lammps']:.2f})")
-    print(f"{'':>10} {'phi':>8} {'p_c':>10} {'tau_c/p_c':>9} {'p-steps/s':>10}")
-    print(f"{'granflow':>10} {phi:>8.4f} {p_c:>10.3e} {tau_c / p_c:>9.3f} {gf_rate:>10.3e}")
-    print(f"{'LAMMPS':>10} {phi_now:>8.4f} {p_l:>10.3e} {tau_l / p_l:>9.3f} "
+    print(f"{'':>10} {'phi':>8} {'p_c':>10} {'tau_c/p_c':>9} {'SE':>7} {'p-steps/s':>10}")
+    print(f"{'granflow':>10} {phi:>8.4f} {p_c:>10.3e} {tau_c / p_c:>9.3f} {gf_ratio_se:>7.3f} "
+          f"{gf_rate:>10.3e}")
+    print(f"{'LAMMPS':>10} {phi_now:>8.4f} {p_l:>10.3e} {tau_l / p_l:>9.3f} {lmp_ratio_se:>7.3f} "
           f"{r['particle_steps_per_s']:>10.3e}")
+    diff = tau_c / p_c - tau_l / p_l
+    print(f"  tau/p difference {diff:+.3f} = {diff / np.hypot(gf_ratio_se, lmp_ratio_se):+.1f} "
+          "combined SE")
     return out
 
 
