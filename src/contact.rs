@@ -226,18 +226,6 @@ pub trait Friction: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
     type History: Copy + Default + Send + Sync + 'static + std::fmt::Debug + PartialEq;
     const FRICTIONAL: bool;
     const NAME: &'static str;
-    /// Tangential force on i; updates the history.
-    #[allow(clippy::too_many_arguments)]
-    fn tangential(
-        kt: f64,
-        ct: f64,
-        mu: f64,
-        fn_mag: f64,
-        n: &V3,
-        vt: &V3,
-        hist: &mut Self::History,
-        dt: f64,
-    ) -> V3;
     /// Negate a history (the pair's orientation i <-> j was swapped).
     fn flip(h: Self::History) -> Self::History;
     fn to_array(h: &Self::History) -> [f64; 3];
@@ -250,10 +238,6 @@ impl Friction for Frictionless {
     type History = ();
     const FRICTIONAL: bool = false;
     const NAME: &'static str = "frictionless";
-    #[inline(always)]
-    fn tangential(_: f64, _: f64, _: f64, _: f64, _: &V3, _: &V3, _: &mut (), _: f64) -> V3 {
-        V3::zeros()
-    }
     fn flip(_: ()) {}
     fn to_array(_: &()) -> [f64; 3] {
         [0.0; 3]
@@ -267,47 +251,6 @@ impl Friction for Coulomb {
     type History = [f64; 3];
     const FRICTIONAL: bool = true;
     const NAME: &'static str = "coulomb";
-    #[inline(always)]
-    fn tangential(
-        kt: f64,
-        ct: f64,
-        mu: f64,
-        fn_mag: f64,
-        n: &V3,
-        vt: &V3,
-        hist: &mut [f64; 3],
-        dt: f64,
-    ) -> V3 {
-        let mut u = V3::new(hist[0], hist[1], hist[2]);
-        // A3 / 2.19: the elastic displacement is carried along by the rotation of the contact
-        // normal: the correction term keeps u in the tangent plane without changing |u| (it is a
-        // rotation). Discretely: project onto the current plane and restore the magnitude.
-        let u2 = u.norm_squared();
-        if u2 > 0.0 {
-            let un = u.dot(n);
-            u -= un * n;
-            // |u_projected|^2 = u2 - un^2; restore |u| (skip when the normal did not turn)
-            let p2 = u2 - un * un;
-            if p2 > 0.0 && un != 0.0 {
-                u *= (u2 / p2).sqrt();
-            }
-        }
-        u += vt * dt;
-        let mut ft = -kt * u - ct * vt;
-        let ft2 = ft.norm_squared();
-        let lim = mu * fn_mag;
-        if ft2 > lim * lim {
-            // Sliding (A2 second line): cap |F_t| at mu |F_n| and rescale the spring so that the
-            // stored displacement is consistent with the capped force.
-            let scale = lim / ft2.sqrt();
-            ft *= scale;
-            if kt > 0.0 {
-                u = -(ft + ct * vt) / kt;
-            }
-        }
-        *hist = [u.x, u.y, u.z];
-        ft
-    }
     fn flip(h: [f64; 3]) -> [f64; 3] {
         [-h[0], -h[1], -h[2]]
     }
@@ -373,10 +316,9 @@ impl<F: Form, T: Friction> Law<F, T> {
         self.alpha * m_eff + self.beta * m_eff.sqrt()
     }
 
-    /// The pair law on `L` contacts at once (`crate::lanes`): the equations of [`Law::eval`]
-    /// (000 A1-A3; the normal from j to i, the lever arms r R_i/(R_i+R_j)), with the
-    /// geometry and the reduced mass computed from the branch vector, and the branches of the
-    /// history rotation and of the Coulomb cap as selects. `stream`: add the streaming
+    /// The pair law on `L` contacts at once (`crate::lanes`): the geometry and the reduced mass
+    /// from the branch vector (the normal from j to i, the lever arms r R_i/(R_i+R_j)), the
+    /// relative surface velocity, then [`Law::law_core`]. `stream`: add the streaming
     /// velocity difference `c.sv` (a deforming cell).
     #[inline(always)]
     pub(crate) fn eval_pairs<const L: usize>(
@@ -386,7 +328,6 @@ impl<F: Form, T: Friction> Law<F, T> {
         stream: bool,
     ) -> PairRes<L> {
         let sp = Ln::<L>::splat;
-        let zero = sp(0.0);
         let rs = c.rs;
         let r = c.r2.sqrt();
         let ims = c.imi + c.imj;
@@ -408,34 +349,56 @@ impl<F: Form, T: Friction> Law<F, T> {
         if stream {
             vrel = vrel + c.sv;
         }
+        let (fnv, ft, u) = self.law_core(&n, delta, rs, meff, &vrel, c.u, dt);
+        PairRes {
+            f: fnv + ft,
+            q: n.cross(&ft).scale(-arm),
+            u,
+            ov: delta * inv_rs,
+            vrel,
+        }
+    }
+
+    /// The law on `L` contacts given their geometry (000 A1-A3): unit normal `n` (from j to
+    /// i), overlap `delta`, pair mean diameter `d`, reduced mass, relative surface velocity
+    /// and tangential displacement `u` from the last step. Returns the normal force, the
+    /// tangential force (on i) and the updated displacement. The branches of the history
+    /// rotation and of the Coulomb cap are selects, so one code serves lanes of pairs and
+    /// single wall contacts (L = 1).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn law_core<const L: usize>(
+        &self,
+        n: &V<L>,
+        delta: Ln<L>,
+        d: Ln<L>,
+        meff: Ln<L>,
+        vrel: &V<L>,
+        u: V<L>,
+        dt: f64,
+    ) -> (V<L>, V<L>, V<L>) {
+        let sp = Ln::<L>::splat;
+        let zero = sp(0.0);
         let (mut s, mut sd) = ([1.0; L], [1.0; L]);
         for l in 0..L {
-            (s[l], sd[l]) = F::factors(delta.0[l], rs.0[l], self.tsuji);
+            (s[l], sd[l]) = F::factors(delta.0[l], d.0[l], self.tsuji);
         }
         let (s, sd) = (Ln(s), Ln(sd));
         let cn = (sp(self.alpha) * meff + sp(self.beta) * meff.sqrt()) * sd;
-        let vn = vrel.dot(&n);
+        let vn = vrel.dot(n);
         let fn_s = s * sp(self.kn) * delta - cn * vn;
         let fnv = n.scale(fn_s);
-        let ov = delta * inv_rs;
         if !T::FRICTIONAL {
-            return PairRes {
-                f: fnv,
-                q: V::zero(),
-                u: c.u,
-                ov,
-                vrel,
-            };
+            return (fnv, V::zero(), u);
         }
-        let vt = vrel - n.scale(vn);
+        let vt = *vrel - n.scale(vn);
         let kt = s * sp(self.kt);
         let ct = sp(self.ratio_t) * cn;
         let lim = sp(self.mu) * fn_s.abs();
         // A3 / 2.19: u is carried along by the rotation of the normal: project onto the
         // current tangent plane and restore |u| (when u is nonzero and the normal turned)
-        let u = c.u;
         let u2 = u.dot(&u);
-        let un = u.dot(&n);
+        let un = u.dot(n);
         let up = u - n.scale(un);
         let p2 = u2 - un * un;
         let turned = p2.gt(zero).and(un.ne(zero));
@@ -451,16 +414,10 @@ impl<F: Form, T: Friction> Law<F, T> {
         let u = slip
             .and(kt.gt(zero))
             .select3((-(ft + vt.scale(ct))).div(kt), u);
-        PairRes {
-            f: fnv + ft,
-            q: n.cross(&ft).scale(-arm),
-            u,
-            ov,
-            vrel,
-        }
+        (fnv, ft, u)
     }
 
-    /// Evaluate the law for a pair in contact.
+    /// Evaluate the law for one contact (walls, checks): [`Law::law_core`] on one lane.
     /// `n`: unit normal (from j to i), `delta` > 0 overlap, `d` pair mean diameter,
     /// `vrel`: relative surface velocity of i w.r.t. j at the contact.
     #[inline(always)]
@@ -475,26 +432,24 @@ impl<F: Form, T: Friction> Law<F, T> {
         hist: &mut T::History,
         dt: f64,
     ) -> PairForce {
-        let (s, sd) = F::factors(delta, d, self.tsuji);
-        let cn = self.damping_coefficient(m_eff) * sd;
-        let vn_s = vrel.dot(n);
-        let fn_s = s * self.kn * delta - cn * vn_s;
-        let fnv = fn_s * n;
-        let ft = if T::FRICTIONAL {
-            let vt = vrel - vn_s * n;
-            T::tangential(
-                s * self.kt,
-                self.ratio_t * cn,
-                self.mu,
-                fn_s.abs(),
-                n,
-                &vt,
-                hist,
-                dt,
-            )
-        } else {
-            V3::zeros()
+        let one = |a: &V3| V {
+            x: Ln([a.x]),
+            y: Ln([a.y]),
+            z: Ln([a.z]),
         };
+        let back = |a: &V<1>| V3::new(a.x.0[0], a.y.0[0], a.z.0[0]);
+        let u = T::to_array(hist);
+        let (fnv, ft, u) = self.law_core::<1>(
+            &one(n),
+            Ln([delta]),
+            Ln([d]),
+            Ln([m_eff]),
+            &one(vrel),
+            one(&V3::new(u[0], u[1], u[2])),
+            dt,
+        );
+        *hist = T::from_array([u.x.0[0], u.y.0[0], u.z.0[0]]);
+        let (fnv, ft) = (back(&fnv), back(&ft));
         PairForce { f: fnv + ft, ft }
     }
 }
