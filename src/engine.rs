@@ -949,7 +949,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
         }
         let mut ps_pieces = stat_pieces(&mut self.pstats, want_stats, ch, nchunks);
-        let pieces: Vec<_> = (0..nchunks)
+        // what each chunk writes, split off the engine's arrays
+        let pieces: Vec<_> = self
+            .p
+            .force
+            .chunks_mut(ch)
+            .zip(self.p.torque.chunks_mut(ch))
             .zip(self.hist.iter())
             .zip(self.hist_next.iter_mut())
             .zip(self.whist.iter())
@@ -958,15 +963,25 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .zip(self.cross_stats.iter_mut())
             .zip(cidx_pieces)
             .zip(ps_pieces.drain(..))
-            .map(|((((((((c, ho), hn), wo), wn), cr), cs), ci), ps)| {
-                (c, ho, hn, wo, wn, cr, cs, ci, ps)
-            })
+            .map(
+                |(((((((((fo, to), hold), hnew), wold), wnew), cross), cstat), cidx), ps)| {
+                    crate::forceloop::ChunkIo {
+                        fo,
+                        to,
+                        hold,
+                        hnew,
+                        wold,
+                        wnew,
+                        cross,
+                        cstat,
+                        cidx,
+                        ps,
+                    }
+                },
+            )
+            .enumerate()
             .collect();
 
-        let mut shifts4 = [[0.0; 4]; 27];
-        for (a, s) in shifts4.iter_mut().zip(shifts.iter()) {
-            *a = [s.x, s.y, s.z, 0.0];
-        }
         let shared = crate::forceloop::Shared {
             law,
             dom,
@@ -976,7 +991,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             own_start,
             pair_j,
             pair_img,
-            shifts: shifts4,
+            shifts,
             xr,
             kin,
             mass,
@@ -985,24 +1000,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         };
         let results: Vec<ChunkOut> = pieces
             .into_par_iter()
-            .zip(self.p.force.par_chunks_mut(ch))
-            .zip(self.p.torque.par_chunks_mut(ch))
-            .map(|((pc, fo), to)| {
-                let (c, hold, hnew, wold, wnew, cross, cstat, cidx, ps) = pc;
-                let io = crate::forceloop::ChunkIo {
-                    fo,
-                    to,
-                    hold,
-                    hnew,
-                    wold,
-                    wnew,
-                    cross,
-                    cstat,
-                    cidx,
-                    ps,
-                };
-                crate::forceloop::chunk::<F, T, D, W, G, STATS, VIR>(&shared, c, io)
-            })
+            .map(|(c, io)| crate::forceloop::chunk::<F, T, D, W, G, STATS, VIR>(&shared, c, io))
             .collect();
         std::mem::swap(&mut self.hist, &mut self.hist_next);
         std::mem::swap(&mut self.whist, &mut self.whist_next);

@@ -382,16 +382,18 @@ fn morton_ranks(nb: [usize; 3]) -> Vec<u32> {
     rank
 }
 
-/// The 27 lattice shifts H n indexed by image code (see `pair_img`).
-pub fn image_shifts(h: &M3) -> [V3; 27] {
-    let mut t = [V3::zeros(); 27];
+/// The 27 lattice shifts H n indexed by image code (see `pair_img`), padded to 4 doubles as
+/// the force loop loads them.
+pub fn image_shifts(h: &M3) -> [[f64; 4]; 27] {
+    let mut t = [[0.0; 4]; 27];
     for (c, v) in t.iter_mut().enumerate() {
         let n = V3::new(
             (c / 9) as f64 - 1.0,
             ((c / 3) % 3) as f64 - 1.0,
             (c % 3) as f64 - 1.0,
         );
-        *v = h * n;
+        let s = h * n;
+        *v = [s.x, s.y, s.z, 0.0];
     }
     t
 }
