@@ -36,7 +36,7 @@ import granflow as gf
 import numpy as np
 from granflow.analysis.errors import mean_se
 from granflow.channel import Channel
-from granflow.io import write_lammps_data
+from granflow.io import _jsonable, write_lammps_data
 from granflow.packing import dense_periodic_packing
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -653,18 +653,6 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------------------------------
-
-
-def _jsonable(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_jsonable(v) for v in o]
-    return o
 
 
 PARTS = ("forces", "run", "traj", "shear", "speed")

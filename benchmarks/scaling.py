@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import subprocess
 import sys
 import time
@@ -34,13 +33,12 @@ from typing import Any
 import numpy as np
 
 HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+import compare_lammps as cl  # noqa: E402  (the cached flowing channel state lives there)
+from kernel_throughput import rss_bytes  # noqa: E402
+
 OUT = HERE / "out"
 SIZES = (5_000, 20_000, 100_000, 1_000_000)
-
-
-def rss_bytes() -> int:
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
 def tiling(n_target: int, n0: int) -> tuple[int, int]:
@@ -57,8 +55,6 @@ def tiling(n_target: int, n0: int) -> tuple[int, int]:
 def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
         grow: str) -> dict[str, Any]:
     """Build and time one size (run in a child process)."""
-    sys.path.insert(0, str(HERE))
-    import compare_lammps as cl
     import granflow as gf
 
     st = cl.channel_state(flow_steps)
@@ -121,18 +117,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", default=str(OUT / "scaling.json"))
     a = ap.parse_args(argv)
     if a.flow_steps is None:
-        sys.path.insert(0, str(HERE))
-        import compare_lammps as cl
-
         a.flow_steps = cl.FLOW_STEPS
     if a.one is not None:
         print(json.dumps(one(int(a.one), a.threads, a.budget, a.flow_steps, a.grow)))
         return
     # make the cached state here, not in the first child (its freed memory would hide that
     # child's resident-set growth)
-    sys.path.insert(0, str(HERE))
-    import compare_lammps as cl
-
     cl.channel_state(a.flow_steps)
     rows = []
     thr = " ".join(f"{f'{t} thr p-steps/s':>17}" for t in a.threads)

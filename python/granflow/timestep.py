@@ -41,6 +41,7 @@ import polars as pl
 
 from granflow.errors import GranflowError, ParameterError
 from granflow.simulation import Box, ContactLaw, Simulation
+from granflow.simulation import contact_time as simulation_contact_time
 
 DEFAULT_FRACS: tuple[int, ...] = (10, 20, 50, 100, 200)
 
@@ -107,11 +108,9 @@ def collision_law(e_n: float | None = 0.82, kn: float = 1e6, form: str = "hooke"
 
 def contact_time(law: ContactLaw, d: tuple[float, float] = (1.0, 1.0),
                  density: float = 1.0) -> float:
-    """``t_c`` the kernel uses for a pair of diameters ``d`` under ``law`` (a probe simulation;
-    raises :class:`granflow.ParameterError` for an over-damped rate ``xi_n``)."""
-    box = Box(length=(4.0 + 4 * max(d),) * 3, periodic=(False,) * 3)
-    x = np.array([[1.0 + d[0], 2.0, 2.0], [3.0 + 2 * d[0] + d[1], 2.0, 2.0]])
-    return Simulation(x, np.asarray(d, float), box, law, density=density).contact_time
+    """``t_c`` the kernel uses for a pair of diameters ``d`` under ``law`` (raises
+    :class:`granflow.ParameterError` for an over-damped rate ``xi_n``)."""
+    return simulation_contact_time(law, np.asarray(d, float), density)
 
 
 def head_on_collision(
