@@ -371,8 +371,7 @@ def energy_balance(cell: ShearCell, steps: int, every: int = 1) -> EnergyBalance
     energy, normal and tangential springs.
     """
     core = cell.sim
-    m = np.asarray(core.masses(), dtype=float)
-    n = len(m)
+    n = core.n
     every = max(1, int(every))
     rows: list[tuple[float, ...]] = []
 
