@@ -170,7 +170,10 @@ where
     cross.clear();
     cstat.clear();
     fo.iter_mut().for_each(|f| *f = V3::zeros());
-    to.iter_mut().for_each(|t| *t = V3::zeros());
+    if T::FRICTIONAL {
+        // without friction nothing ever writes a torque: they stay zero
+        to.iter_mut().for_each(|t| *t = V3::zeros());
+    }
     // a cross slot stays open (u32::MAX) unless pass 2 finds the pair in contact
     cidx.fill(u32::MAX);
     SCRATCH.with(|cell| {
