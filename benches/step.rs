@@ -22,9 +22,13 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
 ) {
     let mut e: Engine<Hooke, T, OrthoBox, W, G> =
         Engine::new(p, law, bx, walls, body, Some(dt), skin()).unwrap();
+    if let Some(k) = std::env::var("PRUNE").ok().and_then(|s| s.parse().ok()) {
+        e.prune_steps = k;
+    }
     e.run(10).unwrap();
     e.timers = Default::default();
     let b0 = e.nl.builds;
+    let q0 = e.nl.prunes;
     let t0 = Instant::now();
     let c0 = cpu_seconds();
     e.run(steps).unwrap();
@@ -32,10 +36,12 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     let cpu = cpu_seconds() - c0;
     let n = e.p.len();
     println!(
-        "{:?}\npairs/particle {:.2} cross {:.2} contacts/particle {:.2} builds {} kernel B/particle {:.0}",
+        "{:?}\npairs/particle {:.2} inner {:.2} (prunes {}) cross {:.2} contacts/particle {:.2} builds {} kernel B/particle {:.0}",
         e.timers,
         e.nl.len() as f64 / n as f64,
-        e.nl.n_cross() as f64 / e.nl.len() as f64,
+        e.nl.inner_len() as f64 / n as f64,
+        e.nl.prunes - q0,
+        e.nl.n_cross() as f64 / e.nl.inner_len() as f64,
         e.diag.contacts as f64 / n as f64,
         e.nl.builds - b0,
         e.memory_list().iter().map(|(_, b)| *b as f64).sum::<f64>() / n as f64

@@ -28,6 +28,10 @@ use crate::{M3, V3};
 use rayon::prelude::*;
 use std::time::Instant;
 
+/// Target lifetime, in steps, of the inner (pruned) pair list: measured on the channel
+/// workload of issue 6 (benchmarks/NOTES.md).
+pub const DEFAULT_PRUNE_STEPS: f64 = 16.0;
+
 /// Most planar walls a scene can have (two side walls and a temporary floor).
 pub const MAX_WALLS: usize = 3;
 
@@ -232,6 +236,12 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// The last evaluation left its cross-chunk pass and final half-kick to the next step's
     /// first pass (plain NVE inside `run`; see `step_once`).
     cross_pending: bool,
+    /// Dynamic pruning (plain NVE): the inner list's skin is chosen at each prune so that it
+    /// lasts about this many steps at the current largest speed; 0 turns pruning off (the
+    /// force loop then tests every listed pair). Results do not depend on it.
+    pub prune_steps: f64,
+    /// Largest squared drift velocity of the last step.
+    vmax2: f64,
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
@@ -334,6 +344,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             energy_ref: None,
             forces_valid: false,
             cross_pending: false,
+            prune_steps: DEFAULT_PRUNE_STEPS,
+            vmax2: f64::INFINITY,
         };
         e.rebuild();
         e.compute_forces_setup();
@@ -393,7 +405,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.cross.resize_with(nchunks, Vec::new);
         self.cross_stats.resize_with(nchunks, Vec::new);
         self.cross_idx.clear();
-        self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
     }
 
     /// Keep the per-contact buffers at about 1.25 times what they hold: pushes during a sweep
@@ -581,7 +592,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         // one pass over the particles: (for plain NVE) the half-kick and drift, then the
         // displacement since the last build and the packed records for the pair loop
         let moved = if D::PLAIN_NVE {
-            self.kick_drift_pack()
+            let (moved, vmax2) = self.kick_drift_pack();
+            self.vmax2 = vmax2;
+            self.nl.inner_moved += vmax2.sqrt() * dt + self.nl.inner_eps;
+            moved
         } else {
             self.domain.integrate_initial(&mut self.p, dt);
             self.pack()
@@ -591,6 +605,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         if moved || !self.nl.valid || self.domain.rebuild_due(self.nl.skin) {
             self.rebuild();
             self.pack();
+        }
+        if self.nl.prune_due() {
+            self.prune();
         }
         let t2 = Instant::now();
         let wf_old = self.diag.wall_force;
@@ -680,13 +697,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// `nve_initial` and `pack` in one pass (same arithmetic, same bits): at large N
     /// the step is bound by memory traffic, and this reads each particle once.
-    fn kick_drift_pack(&mut self) -> bool {
+    /// Returns whether a particle moved more than half the skin since the last build, and
+    /// the largest squared drift velocity.
+    fn kick_drift_pack(&mut self) -> (bool, f64) {
         let ch = chunk_size(self.p.len());
         let n = self.p.len();
         if self.nl.x_build.len() != n {
             self.complete_step();
             crate::domain::nve_initial(&mut self.p, self.dt);
-            return true;
+            return (true, self.max_speed2());
         }
         // the last step's deferred cross pass and final half-kick, particle by particle
         // ahead of this step's half-kick
@@ -717,8 +736,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     rad: &rad[r.clone()],
                     xb: &xb[r.clone()],
                 };
-                let cx = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, h);
-                let pend = if pending { Some(&cx) } else { None };
+                // (the cross index exists only while a pass is pending: a restored state
+                // has none until its first prune)
+                let cx = pending.then(|| CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, h));
+                let pend = cx.as_ref();
                 kick_drift_pack_chunk::<T>(KickChunk {
                     x,
                     v,
@@ -734,7 +755,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     lim,
                 })
             })
-            .reduce(|| false, |a, b| a || b)
+            .reduce(|| (false, 0.0), |a, b| (a.0 || b.0, a.1.max(b.1)))
     }
 
     /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
@@ -870,7 +891,43 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
         self.pack();
+        self.vmax2 = self.max_speed2();
+        self.prune();
         self.evaluate(0.0, 0.0, false);
+    }
+
+    /// Largest squared speed of any particle.
+    fn max_speed2(&self) -> f64 {
+        self.p
+            .v
+            .par_iter()
+            .with_min_len(4096)
+            .map(|v| v.norm_squared())
+            .reduce(|| 0.0, f64::max)
+    }
+
+    /// Rebuild the inner list from the packed positions (after `pack`): the skin is chosen
+    /// so that it lasts `prune_steps` steps at the last step's largest speed (the whole list
+    /// where the domain moves particles itself, or pruning is off).
+    fn prune(&mut self) {
+        let skin = self.nl.skin;
+        let s_in = if D::PLAIN_NVE && self.prune_steps > 0.0 {
+            let want = 2.0 * self.vmax2.sqrt() * self.dt * self.prune_steps;
+            // below 1/50 of the skin a prune would keep hardly fewer pairs
+            let s = want.max(0.02 * skin);
+            // at the outer skin it would keep them all: no pruning
+            if s < 0.5 * skin {
+                s
+            } else {
+                f64::INFINITY
+            }
+        } else {
+            f64::INFINITY
+        };
+        let shifts = image_shifts(&self.domain.h());
+        self.nl.prune(&self.xr, &shifts, s_in);
+        self.cross_idx.clear();
+        self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
     }
 
     /// Finish a step whose cross-chunk pass and final half-kick were deferred.
@@ -929,9 +986,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let planes = self.walls.planes();
         let wlaw = self.walls.law();
         let nl = &self.nl;
-        let own_start = &nl.own_start;
-        let pair_j = &nl.pair_j;
-        let pair_img = &nl.pair_img;
         let shifts = image_shifts(&dom.h());
         let xr = &self.xr;
         let kin = &self.kin;
@@ -988,9 +1042,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             planes,
             wlaw,
             g,
-            own_start,
-            pair_j,
-            pair_img,
+            inner: &nl.inner,
             shifts,
             xr,
             kin,
@@ -1265,8 +1317,9 @@ struct KickChunk<'a, 'b> {
 
 /// Half-kick, drift, displacement check and step records of one chunk (plain NVE), with AVX2
 /// where the CPU has it (elementwise arithmetic: the same bits either way). Returns whether a
-/// particle moved more than half the skin since the last build.
-fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> bool {
+/// particle moved more than half the skin since the last build, and the largest squared
+/// drift velocity (for the inner list's displacement bound).
+fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> (bool, f64) {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
@@ -1277,12 +1330,12 @@ fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> bool {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn kdp_avx2<T: Friction>(k: KickChunk) -> bool {
+fn kdp_avx2<T: Friction>(k: KickChunk) -> (bool, f64) {
     kdp::<T>(k)
 }
 
 #[inline(always)]
-fn kdp<T: Friction>(k: KickChunk) -> bool {
+fn kdp<T: Friction>(k: KickChunk) -> (bool, f64) {
     let KickChunk {
         x,
         v,
@@ -1307,6 +1360,7 @@ fn kdp<T: Friction>(k: KickChunk) -> bool {
         assert!(cx.ii.len() == n);
     }
     let mut moved = false;
+    let mut vm = 0.0f64;
     for l in 0..n {
         if let Some(cx) = pend {
             // SAFETY: l < n, the length of every per-particle slice (asserted above)
@@ -1315,6 +1369,7 @@ fn kdp<T: Friction>(k: KickChunk) -> bool {
         let vn = v[l] + f[l] * (h * im[l]);
         v[l] = vn;
         x[l] += vn * dt;
+        vm = vm.max(vn.norm_squared());
         // without friction there are no torques: spins never change
         if T::FRICTIONAL {
             w[l] += t[l] * (h * ii[l]);
@@ -1330,7 +1385,7 @@ fn kdp<T: Friction>(k: KickChunk) -> bool {
             [vp.x, vp.y, vp.z, im[l], wl.x, wl.y, wl.z, rad[l]]
         };
     }
-    moved
+    (moved, vm)
 }
 
 /// Packed position record of the pair loop: (x, R).

@@ -17,6 +17,7 @@ use crate::domain::Domain;
 use crate::engine::{Body, ChunkOut, PairOut, Plane, Walls, MAX_WALLS};
 use crate::history::{Cursor, HistList};
 use crate::lanes::{Ln, PairIn, V};
+use crate::neighbor::InnerChunk;
 use crate::V3;
 use std::cell::RefCell;
 
@@ -32,9 +33,8 @@ pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
     pub planes: &'a [Plane],
     pub wlaw: Option<&'a Law<F, T>>,
     pub g: V3,
-    pub own_start: &'a [u32],
-    pub pair_j: &'a [u32],
-    pub pair_img: &'a [u8],
+    /// The pairs to test, per chunk (`NeighborList::prune`).
+    pub inner: &'a [InnerChunk],
     /// Periodic image shifts by image code, padded to 4 doubles.
     pub shifts: [[f64; 4]; 27],
     /// (x, R) per particle.
@@ -161,7 +161,8 @@ where
     let mut out = ChunkOut::default();
     let i0 = c * s.ch;
     let i1 = i0 + fo.len();
-    let base = s.own_start[i0] as usize;
+    let ic = &s.inner[c];
+    assert_eq!(ic.start.len(), fo.len() + 1);
     let mut xs = 0usize;
     let mut hc = Cursor::new(hold);
     let mut wc = Cursor::new(wold);
@@ -181,17 +182,17 @@ where
         let mut b0 = i0;
         while b0 < i1 {
             let b1 = (b0 + BLOCK).min(i1);
-            sc.fit((s.own_start[b1] - s.own_start[b0]) as usize);
+            sc.fit((ic.start[b1 - i0] - ic.start[b0 - i0]) as usize);
             let nc = if AVX {
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs.
                 unsafe {
-                    avx::filter(s, sc, b0, b1, i1, base, &mut xs)
+                    avx::filter(s, ic, sc, b0 - i0, b1 - i0, i0, i1, &mut xs)
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 unreachable!()
             } else {
-                filter(s, sc, b0, b1, i1, base, &mut xs)
+                filter(s, ic, sc, b0 - i0, b1 - i0, i0, i1, &mut xs)
             };
             out.contacts += nc;
             let mut sums = Sums {
@@ -215,31 +216,34 @@ where
     out
 }
 
-/// Pass 1 (baseline): the distance test, contacts appended in list order. Returns their
-/// number. Cross slots are numbered in list order, open ones included.
+/// Pass 1 (baseline): the distance test over the inner list's pairs of the block's particles
+/// (chunk-local indices l0..l1; the chunk is particles i0..i1), contacts appended in list
+/// order. Returns their number. Cross slots are numbered in list order, open ones included.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn filter<F: Form, T: Friction, D>(
     s: &Shared<F, T, D>,
+    ic: &InnerChunk,
     sc: &mut Scratch,
-    b0: usize,
-    b1: usize,
+    l0: usize,
+    l1: usize,
+    i0: usize,
     i1: usize,
-    base: usize,
     xs: &mut usize,
 ) -> usize {
-    let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
+    let xr = s.xr;
     let mut nc = 0usize;
-    for i in b0..b1 {
-        let (k0, k1) = (s.own_start[i] as usize, s.own_start[i + 1] as usize);
+    for l in l0..l1 {
+        let i = i0 + l;
+        let (k0, k1) = (ic.start[l] as usize, ic.start[l + 1] as usize);
         let [xi0, xi1, xi2, ri] = xr[i];
         for k in k0..k1 {
             // SAFETY: list indices are < n by construction (built from 0..n); the scratch
-            // holds at least the block's pairs (`fit`).
-            let j = unsafe { *pair_j.get_unchecked(k) } as usize;
+            // holds at least the block's pairs (`fit`); k < the inner list's length
+            let j = unsafe { *ic.j.get_unchecked(k) } as usize;
             let is_cross = j >= i1;
             let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
-            let sh = unsafe { s.shifts.get_unchecked(*pair_img.get_unchecked(k) as usize) };
+            let sh = unsafe { s.shifts.get_unchecked(*ic.img.get_unchecked(k) as usize) };
             let dx = xi0 - xj0 - sh[0];
             let dy = xi1 - xj1 - sh[1];
             let dz = xi2 - xj2 - sh[2];
@@ -252,7 +256,8 @@ fn filter<F: Form, T: Friction, D>(
             }
             let slot = if is_cross { *xs as u32 } else { u32::MAX };
             unsafe {
-                *sc.ids.get_unchecked_mut(nc) = [i as u32, j as u32, (k - base) as u32, slot];
+                let key = *ic.key.get_unchecked(k);
+                *sc.ids.get_unchecked_mut(nc) = [i as u32, j as u32, key, slot];
                 *sc.rec.get_unchecked_mut(nc) = [dx, dy, dz, rs];
             }
             *xs += is_cross as usize;
@@ -541,7 +546,7 @@ pub(crate) fn add10(acc: &mut [f64; 10], rec: &[f64; 10]) {
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::{Scratch, Shared};
+    use super::{InnerChunk, Scratch, Shared};
     use crate::contact::{Form, Friction};
     use crate::lanes::{Ln, PairIn};
     use std::arch::x86_64::*;
@@ -587,26 +592,27 @@ mod avx {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn filter<F: Form, T: Friction, D>(
         s: &Shared<F, T, D>,
+        ic: &InnerChunk,
         sc: &mut Scratch,
-        b0: usize,
-        b1: usize,
+        l0: usize,
+        l1: usize,
+        i0: usize,
         i1: usize,
-        base: usize,
         xs: &mut usize,
     ) -> usize {
-        let (xr, pair_j, pair_img) = (s.xr, s.pair_j, s.pair_img);
-        let (kb, ke) = (s.own_start[b0] as usize, s.own_start[b1] as usize);
+        let xr = s.xr;
+        let (pair_j, pair_img, pair_key) = (&ic.j[..], &ic.img[..], &ic.key[..]);
+        let (kb, ke) = (ic.start[l0] as usize, ic.start[l1] as usize);
         // the owner of every pair of the block (the list is stored by owner)
-        for i in b0..b1 {
-            let (k0, k1) = (s.own_start[i] as usize, s.own_start[i + 1] as usize);
-            sc.own[k0 - kb..k1 - kb].fill(i as u32);
+        for l in l0..l1 {
+            let (k0, k1) = (ic.start[l] as usize, ic.start[l + 1] as usize);
+            sc.own[k0 - kb..k1 - kb].fill((i0 + l) as u32);
         }
         let mut nc = 0usize;
         // cross slots stay open (u32::MAX) unless pass 2 finds them closed
         let mut x = *xs;
         let rmask = _mm256_castsi256_pd(_mm256_set_epi64x(-1, 0, 0, 0));
         let lim = _mm_set1_epi32(i1 as i32 - 1);
-        let lane = _mm_set_epi32(3, 2, 1, 0);
         let (ids, recs) = (sc.ids.as_mut_ptr(), sc.rec.as_mut_ptr());
         let mut k = kb;
         while k < ke {
@@ -614,12 +620,13 @@ mod avx {
             // SAFETY: k + 4 <= ke <= the list length on the fast path; otherwise lanes past
             // the block's pairs repeat its last pair (masked off below); own holds the
             // block's pairs
-            let (is, js, cs) = unsafe {
+            let (is, js, cs, ks) = unsafe {
                 if m == 4 {
                     (
                         std::ptr::read_unaligned(sc.own.as_ptr().add(k - kb) as *const [u32; 4]),
                         std::ptr::read_unaligned(pair_j.as_ptr().add(k) as *const [u32; 4]),
                         std::ptr::read_unaligned(pair_img.as_ptr().add(k) as *const [u8; 4]),
+                        std::ptr::read_unaligned(pair_key.as_ptr().add(k) as *const [u32; 4]),
                     )
                 } else {
                     let kl = |l: usize| k + l.min(m - 1);
@@ -627,6 +634,7 @@ mod avx {
                         [0, 1, 2, 3].map(|l| *sc.own.get_unchecked(kl(l) - kb)),
                         [0, 1, 2, 3].map(|l| *pair_j.get_unchecked(kl(l))),
                         [0, 1, 2, 3].map(|l| *pair_img.get_unchecked(kl(l))),
+                        [0, 1, 2, 3].map(|l| *pair_key.get_unchecked(kl(l))),
                     )
                 }
             };
@@ -678,7 +686,8 @@ mod avx {
                 _mm_add_epi32(_mm_set1_epi32(x as i32), before),
                 xv,
             );
-            let kk = _mm_add_epi32(_mm_set1_epi32(k.wrapping_sub(base) as i32), lane);
+            // SAFETY: 16 bytes
+            let kk = unsafe { _mm_loadu_si128(ks.as_ptr() as *const __m128i) };
             // (i, j, kk, slot) per lane
             let t0 = _mm_unpacklo_epi32(iv, jv);
             let t1 = _mm_unpackhi_epi32(iv, jv);

@@ -40,8 +40,21 @@ pub struct NeighborList {
     pub pair_img: Vec<u8>,
     /// own_start[i]..own_start[i+1]: pairs whose first particle is i.
     pub own_start: Vec<u32>,
-    /// Cross pairs (second particle in a later chunk) are numbered in list order; chunk c owns
-    /// slots cross_off[c]..cross_off[c+1].
+    /// The pairs the force loop tests, per force-loop chunk: the listed pairs that were
+    /// within `inner_skin` of contact at the last prune (dynamic pruning, as GROMACS's
+    /// inner list). Cross slots below are numbered over these.
+    pub inner: Vec<InnerChunk>,
+    /// Gap below which a listed pair was kept at the last prune (infinite: every pair).
+    pub inner_skin: f64,
+    /// Bound on how far any particle has moved since the last prune (sum over the steps of
+    /// the largest drift, plus the rounding of the positions).
+    pub inner_moved: f64,
+    /// Rounding allowance added to `inner_moved` per step.
+    pub inner_eps: f64,
+    pub inner_valid: bool,
+    pub prunes: u64,
+    /// Cross pairs of the inner list (second particle in a later chunk) are numbered in list
+    /// order; chunk c owns slots cross_off[c]..cross_off[c+1].
     pub cross_off: Vec<u32>,
     /// cross_start[j]..cross_start[j+1] index into cross_slot: the cross pairs whose second
     /// particle is j, in list order.
@@ -49,6 +62,8 @@ pub struct NeighborList {
     pub cross_slot: Vec<u32>,
     /// The chunk that owns each entry of cross_slot (slots are numbered by chunk).
     pub cross_src: Vec<u16>,
+    /// Scratch of `build_cross` (kept to avoid an allocation per prune).
+    cross_fill: Vec<u32>,
     /// Positions at the last build (for the half-skin criterion).
     /// (single precision: it only decides when to rebuild, with `xb_eps` as the margin).
     pub x_build: Vec<[f32; 3]>,
@@ -65,10 +80,17 @@ impl NeighborList {
             pair_j: vec![],
             pair_img: vec![],
             own_start: vec![],
+            inner: vec![],
+            inner_skin: f64::INFINITY,
+            inner_moved: 0.0,
+            inner_eps: 0.0,
+            inner_valid: false,
+            prunes: 0,
             cross_off: vec![],
             cross_start: vec![],
             cross_slot: vec![],
             cross_src: vec![],
+            cross_fill: vec![],
             x_build: vec![],
             xb_eps: 0.0,
             builds: 0,
@@ -102,7 +124,12 @@ impl NeighborList {
         b
     }
 
-    /// Number of cross pairs (buffered between chunks).
+    /// Pairs in the inner list.
+    pub fn inner_len(&self) -> usize {
+        self.inner.iter().map(|c| c.j.len()).sum()
+    }
+
+    /// Number of cross pairs of the inner list (buffered between chunks).
     pub fn n_cross(&self) -> usize {
         self.cross_slot.len()
     }
@@ -275,8 +302,8 @@ impl NeighborList {
             }
             self.pair_j.extend_from_slice(js);
         }
-        self.build_cross(n);
         self.set_images(&p.x, dom, &hinv);
+        self.inner_valid = false;
 
         self.x_build.clear();
         self.x_build
@@ -305,49 +332,174 @@ impl NeighborList {
         self.pair_img = img;
     }
 
-    /// Number the cross pairs and index them by second particle (from pair_j and own_start).
-    pub fn build_cross(&mut self, n: usize) {
-        let ch = chunk_size(self.own_start.len().saturating_sub(1));
+    /// True if the inner list may have lost a pair that is now within contact: some
+    /// particle may have moved half the inner skin since the prune.
+    pub fn prune_due(&self) -> bool {
+        !self.inner_valid || 2.0 * self.inner_moved >= self.inner_skin
+    }
+
+    /// Keep, per force-loop chunk and in list order, the listed pairs with a gap below
+    /// `inner_skin` (positions from the packed (x, R) records; `shifts` by image code), then
+    /// number the cross pairs. Between prunes every pair that can touch is kept as long as
+    /// no particle moved `inner_skin / 2` (`prune_due`), so the force loop sees exactly the
+    /// contacts, in the same order, as over the whole list: pruning changes no result.
+    pub fn prune(&mut self, xr: &[[f64; 4]], shifts: &[[f64; 4]; 27], inner_skin: f64) {
+        let n = self.own_start.len().saturating_sub(1);
+        let ch = chunk_size(n);
+        let nchunks = n.div_ceil(ch);
+        self.inner.resize_with(nchunks, InnerChunk::default);
+        let (own_start, pair_j, pair_img) = (&self.own_start, &self.pair_j, &self.pair_img);
+        self.inner.par_iter_mut().enumerate().for_each(|(c, ic)| {
+            let (i0, i1) = (c * ch, ((c + 1) * ch).min(n));
+            prune_chunk(ic, i0, i1, own_start, pair_j, pair_img, xr, shifts, inner_skin);
+        });
+        self.build_cross(n);
+        let xmax = xr
+            .iter()
+            .map(|r| r[0].abs().max(r[1].abs()).max(r[2].abs()))
+            .fold(0.0f64, f64::max);
+        // a drift x + v dt rounds by at most half an ulp of the coordinate, per axis
+        self.inner_eps = 4.0 * f64::EPSILON * (1.0 + xmax);
+        self.inner_skin = inner_skin;
+        self.inner_moved = 0.0;
+        self.inner_valid = true;
+        self.prunes += 1;
+    }
+
+    /// Number the inner list's cross pairs and index them by second particle.
+    fn build_cross(&mut self, n: usize) {
+        let ch = chunk_size(n);
         let nchunks = n.div_ceil(ch);
         self.cross_off.clear();
         self.cross_off.reserve(nchunks + 1);
+        let mut total = 0u32;
+        for ic in &self.inner {
+            self.cross_off.push(total);
+            total += ic.ncross;
+        }
+        self.cross_off.push(total);
         self.cross_start.clear();
         self.cross_start.resize(n + 1, 0);
-        let mut partner: Vec<u32> = Vec::new();
-        for c in 0..nchunks {
-            self.cross_off.push(partner.len() as u32);
+        for (c, ic) in self.inner.iter().enumerate() {
             let end = ((c + 1) * ch).min(n) as u32;
-            let (lo, hi) = (
-                self.own_start[c * ch] as usize,
-                self.own_start[((c + 1) * ch).min(n)] as usize,
-            );
-            for &j in &self.pair_j[lo..hi] {
-                if j >= end {
-                    partner.push(j);
-                    self.cross_start[j as usize + 1] += 1;
-                }
+            for &j in ic.j.iter().filter(|&&j| j >= end) {
+                self.cross_start[j as usize + 1] += 1;
             }
         }
-        self.cross_off.push(partner.len() as u32);
         for j in 0..n {
             self.cross_start[j + 1] += self.cross_start[j];
         }
-        self.cross_slot = vec![0; partner.len()];
         assert!(
             nchunks <= u16::MAX as usize + 1,
             "too many force-loop chunks"
         );
-        self.cross_src = vec![0; partner.len()];
-        let mut fill = self.cross_start.clone();
-        for c in 0..nchunks {
-            let (a, b) = (self.cross_off[c] as usize, self.cross_off[c + 1] as usize);
-            for (s, &j) in partner.iter().enumerate().take(b).skip(a) {
-                let j = j as usize;
-                self.cross_slot[fill[j] as usize] = s as u32;
-                self.cross_src[fill[j] as usize] = c as u16;
-                fill[j] += 1;
+        self.cross_slot.clear();
+        self.cross_slot.resize(total as usize, 0);
+        self.cross_src.clear();
+        self.cross_src.resize(total as usize, 0);
+        // reuse cross_start's tail as the fill pointers: fill[j] = cross_start[j] + done
+        let mut fill = std::mem::take(&mut self.cross_fill);
+        fill.clear();
+        fill.extend_from_slice(&self.cross_start[..n]);
+        for (c, ic) in self.inner.iter().enumerate() {
+            let end = ((c + 1) * ch).min(n) as u32;
+            let mut s = self.cross_off[c];
+            for &j in ic.j.iter().filter(|&&j| j >= end) {
+                let f = &mut fill[j as usize];
+                self.cross_slot[*f as usize] = s;
+                self.cross_src[*f as usize] = c as u16;
+                *f += 1;
+                s += 1;
             }
         }
+        self.cross_fill = fill;
+    }
+}
+
+/// The inner list of the chunk of particles i0..i1: every pair is written at the next free
+/// place, which advances only for a kept pair (no branch on the unpredictable test).
+#[allow(clippy::too_many_arguments)]
+fn prune_chunk(
+    ic: &mut InnerChunk,
+    i0: usize,
+    i1: usize,
+    own_start: &[u32],
+    pair_j: &[u32],
+    pair_img: &[u8],
+    xr: &[[f64; 4]],
+    shifts: &[[f64; 4]; 27],
+    inner_skin: f64,
+) {
+    let (kb, ke) = (own_start[i0] as usize, own_start[i1] as usize);
+    let m = ke - kb;
+    PRUNE_SCRATCH.with(|cell| {
+        let sc = &mut *cell.borrow_mut();
+        // room for every pair; the kept ones are copied out at the end, so the chunk's
+        // lists hold no more than they keep
+        if sc.len() < m {
+            sc.resize(m, 0);
+        }
+        ic.start.clear();
+        ic.start.push(0);
+        let (pj, pi) = (&pair_j[kb..ke], &pair_img[kb..ke]);
+        let keys = &mut sc[..m];
+        let mut len = 0usize;
+        let mut ncross = 0u32;
+        for i in i0..i1 {
+            let [xi0, xi1, xi2, ri] = xr[i];
+            let (k0, k1) = (own_start[i] as usize - kb, own_start[i + 1] as usize - kb);
+            for k in k0..k1.min(m) {
+                let (j, img) = (pj[k], pi[k]);
+                let [xj0, xj1, xj2, rj] = xr[j as usize];
+                let sh = &shifts[img as usize % 27];
+                let (dx, dy, dz) = (xi0 - xj0 - sh[0], xi1 - xj1 - sh[1], xi2 - xj2 - sh[2]);
+                let r2 = dx * dx + dy * dy + dz * dz;
+                let cut = ri + rj + inner_skin;
+                // a NaN distance is kept: the force loop reports it as a contact
+                #[allow(clippy::neg_cmp_op_on_partial_ord)]
+                let keep = !(r2 >= cut * cut);
+                // written at the next free place (len <= k < m), kept by advancing it
+                keys[len.min(m - 1)] = k as u32;
+                len += keep as usize;
+                ncross += (keep && j as usize >= i1) as u32;
+            }
+            ic.start.push(len as u32);
+        }
+        let keys = &keys[..len];
+        for v in [&mut ic.key, &mut ic.j] {
+            v.clear();
+            v.reserve_exact(len);
+        }
+        ic.img.clear();
+        ic.img.reserve_exact(len);
+        ic.key.extend_from_slice(keys);
+        ic.j.extend(keys.iter().map(|&k| pj[k as usize]));
+        ic.img.extend(keys.iter().map(|&k| pi[k as usize]));
+        ic.ncross = ncross;
+    });
+}
+
+thread_local! {
+    static PRUNE_SCRATCH: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// One force-loop chunk's part of the inner list (see `NeighborList::prune`).
+#[derive(Clone, Debug, Default)]
+pub struct InnerChunk {
+    /// start[l]..start[l + 1]: the pairs of the chunk's particle l.
+    pub start: Vec<u32>,
+    /// Second particle, image code and history key (the pair's index in the full list,
+    /// counted from the chunk's first pair) of each pair.
+    pub j: Vec<u32>,
+    pub img: Vec<u8>,
+    pub key: Vec<u32>,
+    /// Pairs whose second particle lies in a later chunk.
+    pub ncross: u32,
+}
+
+impl InnerChunk {
+    pub fn bytes(&self) -> usize {
+        self.start.capacity() * 4 + self.j.capacity() * 4 + self.img.capacity() + self.key.capacity() * 4
     }
 }
 

@@ -130,6 +130,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     + vec_bytes(&nl.x_build),
             ),
             (
+                "inner (pruned) pair list".to_string(),
+                nl.inner.iter().map(|c| c.bytes()).sum::<usize>()
+                    + nl.inner.capacity() * std::mem::size_of::<crate::neighbor::InnerChunk>(),
+            ),
+            (
                 "cross-chunk contact forces".to_string(),
                 self.cross.iter().map(vec_bytes).sum::<usize>()
                     + self.cross_idx.capacity() * 4
@@ -423,7 +428,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 "pair list offsets do not match the particle count".into()
             ));
         }
-        nl.build_cross(n);
+        nl.inner_valid = false;
         nl.x_build = r
             .f64s("nl.x_build")?
             .chunks_exact(3)
