@@ -388,7 +388,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     pub fn rebuild(&mut self) {
         self.wrap_all();
         let (pairs, walls) = self.carried_histories();
-        self.nl.build(&mut self.p, &self.domain);
+        self.nl.build(&mut self.p, &self.domain, D::PLAIN_NVE);
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
         self.trim();
@@ -592,10 +592,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         // one pass over the particles: (for plain NVE) the half-kick and drift, then the
         // displacement since the last build and the packed records for the pair loop
         let moved = if D::PLAIN_NVE {
-            let (moved, vmax2) = self.kick_drift_pack();
+            let vmax2 = self.kick_drift_pack();
             self.vmax2 = vmax2;
-            self.nl.inner_moved += vmax2.sqrt() * dt + self.nl.inner_eps;
-            moved
+            self.nl.add_drift(vmax2.sqrt(), dt);
+            self.nl.moved_out()
         } else {
             self.domain.integrate_initial(&mut self.p, dt);
             self.pack()
@@ -697,23 +697,21 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// `nve_initial` and `pack` in one pass (same arithmetic, same bits): at large N
     /// the step is bound by memory traffic, and this reads each particle once.
-    /// Returns whether a particle moved more than half the skin since the last build, and
-    /// the largest squared drift velocity.
-    fn kick_drift_pack(&mut self) -> (bool, f64) {
+    /// Returns the largest squared drift velocity (the lists' displacement bounds grow by
+    /// it times dt).
+    fn kick_drift_pack(&mut self) -> f64 {
         let ch = chunk_size(self.p.len());
         let n = self.p.len();
-        if self.nl.x_build.len() != n {
+        if !self.nl.valid || self.nl.own_start.len() != n + 1 {
             self.complete_step();
             crate::domain::nve_initial(&mut self.p, self.dt);
-            return (true, self.max_speed2());
+            return f64::INFINITY;
         }
         // the last step's deferred cross pass and final half-kick, particle by particle
         // ahead of this step's half-kick
         let pending = std::mem::take(&mut self.cross_pending);
         let dt = self.dt;
         let h = 0.5 * dt;
-        let lim = self.nl.moved_limit2();
-        let xb = &self.nl.x_build;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
         let nl = &self.nl;
@@ -734,7 +732,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     im: &im[r.clone()],
                     ii: &ii[r.clone()],
                     rad: &rad[r.clone()],
-                    xb: &xb[r.clone()],
                 };
                 // (the cross index exists only while a pass is pending: a restored state
                 // has none until its first prune)
@@ -752,10 +749,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     pend,
                     h,
                     dt,
-                    lim,
                 })
             })
-            .reduce(|| (false, 0.0), |a, b| (a.0 || b.0, a.1.max(b.1)))
+            .reduce(|| 0.0, f64::max)
     }
 
     /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
@@ -1293,7 +1289,6 @@ struct KickSrc<'a> {
     im: &'a [f64],
     ii: &'a [f64],
     rad: &'a [f64],
-    xb: &'a [[f32; 3]],
 }
 
 /// One chunk's slices for the fused half-kick, drift and packing pass, and what it reads.
@@ -1311,15 +1306,12 @@ struct KickChunk<'a, 'b> {
     pend: Option<&'b CrossSrc<'b>>,
     h: f64,
     dt: f64,
-    /// Squared half-skin: a larger displacement since the build asks for a rebuild.
-    lim: f64,
 }
 
-/// Half-kick, drift, displacement check and step records of one chunk (plain NVE), with AVX2
-/// where the CPU has it (elementwise arithmetic: the same bits either way). Returns whether a
-/// particle moved more than half the skin since the last build, and the largest squared
-/// drift velocity (for the inner list's displacement bound).
-fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> (bool, f64) {
+/// Half-kick, drift and step records of one chunk (plain NVE), with AVX2 where the CPU has
+/// it (elementwise arithmetic: the same bits either way). Returns the largest squared drift
+/// velocity (the displacement bounds of the pair lists grow by it).
+fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> f64 {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
@@ -1330,12 +1322,12 @@ fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> (bool, f64) {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn kdp_avx2<T: Friction>(k: KickChunk) -> (bool, f64) {
+fn kdp_avx2<T: Friction>(k: KickChunk) -> f64 {
     kdp::<T>(k)
 }
 
 #[inline(always)]
-fn kdp<T: Friction>(k: KickChunk) -> (bool, f64) {
+fn kdp<T: Friction>(k: KickChunk) -> f64 {
     let KickChunk {
         x,
         v,
@@ -1348,18 +1340,16 @@ fn kdp<T: Friction>(k: KickChunk) -> (bool, f64) {
         pend,
         h,
         dt,
-        lim,
     } = k;
     let n = x.len();
     // equal lengths let the compiler drop the bounds checks
     let (v, w, a, b) = (&mut v[..n], &mut w[..n], &mut a[..n], &mut b[..n]);
     let (f, t) = (&mut f[..n], &mut t[..n]);
-    let (im, ii, rad, xb) = (&s.im[..n], &s.ii[..n], &s.rad[..n], &s.xb[..n]);
+    let (im, ii, rad) = (&s.im[..n], &s.ii[..n], &s.rad[..n]);
     if let Some(cx) = pend {
         assert!(cx.cs.len() == n + 1 && cx.rad.len() == n && cx.im.len() == n);
         assert!(cx.ii.len() == n);
     }
-    let mut moved = false;
     let mut vm = 0.0f64;
     for l in 0..n {
         if let Some(cx) = pend {
@@ -1374,9 +1364,7 @@ fn kdp<T: Friction>(k: KickChunk) -> (bool, f64) {
         if T::FRICTIONAL {
             w[l] += t[l] * (h * ii[l]);
         }
-        let xi = x[l];
-        moved |= (xi - widen(&xb[l])).norm_squared() > lim;
-        a[l] = xr_record(&xi, rad[l]);
+        a[l] = xr_record(&x[l], rad[l]);
         b[l] = if T::FRICTIONAL {
             kin_record(&vn, &w[l], &f[l], &t[l], im[l], ii[l], h, rad[l])
         } else {
@@ -1385,7 +1373,7 @@ fn kdp<T: Friction>(k: KickChunk) -> (bool, f64) {
             [vp.x, vp.y, vp.z, im[l], wl.x, wl.y, wl.z, rad[l]]
         };
     }
-    (moved, vm)
+    vm
 }
 
 /// Packed position record of the pair loop: (x, R).

@@ -64,7 +64,13 @@ pub struct NeighborList {
     pub cross_src: Vec<u16>,
     /// Scratch of `build_cross` (kept to avoid an allocation per prune).
     cross_fill: Vec<u32>,
-    /// Positions at the last build (for the half-skin criterion).
+    /// Plain NVE: the displacement since the build is bounded by the largest drift speed
+    /// of every step (`moved`), and no positions are kept. Otherwise (a cell that moves
+    /// particles itself) the positions at the build decide (`x_build`).
+    pub by_speed: bool,
+    /// Bound on how far any particle has moved since the build (`by_speed`).
+    pub moved: f64,
+    /// Positions at the last build (for the half-skin criterion when not `by_speed`).
     /// (single precision: it only decides when to rebuild, with `xb_eps` as the margin).
     pub x_build: Vec<[f32; 3]>,
     /// Bound on the rounding of `x_build`.
@@ -91,6 +97,8 @@ impl NeighborList {
             cross_slot: vec![],
             cross_src: vec![],
             cross_fill: vec![],
+            by_speed: false,
+            moved: 0.0,
             x_build: vec![],
             xb_eps: 0.0,
             builds: 0,
@@ -144,9 +152,15 @@ impl NeighborList {
         out
     }
 
-    /// True if some particle moved more than half the skin since the last build.
+    /// True if some particle may have moved half the skin since the last build.
     pub fn needs_rebuild<D: Domain>(&self, p: &Particles, dom: &D) -> bool {
-        if !self.valid || self.x_build.len() != p.len() {
+        if !self.valid || self.own_start.len() != p.len() + 1 {
+            return true;
+        }
+        if self.by_speed {
+            return self.moved_out();
+        }
+        if self.x_build.len() != p.len() {
             return true;
         }
         let lim = self.moved_limit2();
@@ -154,6 +168,21 @@ impl NeighborList {
             .zip(self.x_build.par_iter())
             .with_min_len(4096)
             .any(|(x, x0)| dom.delta(x, &widen(x0)).norm_squared() > lim)
+    }
+
+    /// `by_speed`: the bound on the displacements since the build reached half the skin.
+    #[inline]
+    pub fn moved_out(&self) -> bool {
+        2.0 * self.moved >= self.skin
+    }
+
+    /// Add one step's drift (largest speed times dt, plus its rounding) to the displacement
+    /// bounds of the list and of the inner list.
+    #[inline]
+    pub fn add_drift(&mut self, vmax: f64, dt: f64) {
+        let d = vmax * dt + self.inner_eps;
+        self.moved += d;
+        self.inner_moved += d;
     }
 
     /// Squared displacement since the build beyond which the list must be rebuilt: half the
@@ -166,7 +195,8 @@ impl NeighborList {
 
     /// Rebuild: spatially sort particles (along a Morton curve of cells) and rebuild the pair
     /// list. The engine carries the contact histories over by particle id.
-    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) {
+    /// `by_speed`: see the field.
+    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D, by_speed: bool) {
         let n = p.len();
         // 2. cells in fractional coordinates
         let rmax = p.max_radius();
@@ -305,12 +335,22 @@ impl NeighborList {
         self.set_images(&p.x, dom, &hinv);
         self.inner_valid = false;
 
-        self.x_build.clear();
-        self.x_build
-            .extend(p.x.iter().map(|x| [x.x as f32, x.y as f32, x.z as f32]));
         let xmax = p.x.iter().map(|x| x.amax()).fold(0.0f64, f64::max);
-        // |x - (x as f32)| <= 2^-24 |x| per coordinate; sqrt(3) for the vector
-        self.xb_eps = 1.8 * xmax * f64::from(f32::EPSILON);
+        self.by_speed = by_speed;
+        self.moved = 0.0;
+        self.x_build.clear();
+        if by_speed {
+            self.x_build.shrink_to_fit();
+            self.xb_eps = 0.0;
+        } else {
+            self.x_build
+                .extend(p.x.iter().map(|x| [x.x as f32, x.y as f32, x.z as f32]));
+            // |x - (x as f32)| <= 2^-24 |x| per coordinate; sqrt(3) for the vector
+            self.xb_eps = 1.8 * xmax * f64::from(f32::EPSILON);
+        }
+        // a drift x + v dt rounds by at most half an ulp per coordinate; positions stay
+        // within half a skin of where they were wrapped until the next build
+        self.inner_eps = 4.0 * f64::EPSILON * (1.0 + xmax + self.skin);
         self.builds += 1;
         self.valid = true;
     }
@@ -354,12 +394,6 @@ impl NeighborList {
             prune_chunk(ic, i0, i1, own_start, pair_j, pair_img, xr, shifts, inner_skin);
         });
         self.build_cross(n);
-        let xmax = xr
-            .iter()
-            .map(|r| r[0].abs().max(r[1].abs()).max(r[2].abs()))
-            .fold(0.0f64, f64::max);
-        // a drift x + v dt rounds by at most half an ulp of the coordinate, per axis
-        self.inner_eps = 4.0 * f64::EPSILON * (1.0 + xmax);
         self.inner_skin = inner_skin;
         self.inner_moved = 0.0;
         self.inner_valid = true;

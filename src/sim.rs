@@ -299,7 +299,8 @@ use crate::checkpoint::{flat_v3, unflat_v3, Reader, Writer};
 
 impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W, G> {
     /// Everything needed to continue bitwise identically: internal particle order, the pair
-    /// list as built (rebuild timing depends on x_build), histories, last forces.
+    /// list as built (rebuild timing depends on the displacement bound or x_build), histories,
+    /// last forces. The inner (pruned) list is not saved: it changes no result.
     pub fn save_state(&self, w: &mut Writer) {
         let p = &self.p;
         w.text("engine.kind", &self.kind_string());
@@ -322,6 +323,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let xb: Vec<f64> = nl.x_build.iter().flatten().map(|&c| c as f64).collect();
         w.f64s("nl.x_build", &xb);
         w.f64s("nl.xb_eps", &[nl.xb_eps]);
+        w.u32s(
+            "nl.pair_img",
+            &nl.pair_img.iter().map(|&c| c as u32).collect::<Vec<_>>(),
+        );
+        w.f64s("nl.moved", &[nl.moved, nl.inner_eps, nl.by_speed as u8 as f64]);
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
         // contact histories by particle ids (placed back into the list on loading)
         let (hp, hw) = self.carried_histories();
@@ -462,13 +468,31 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.set_histories(&pairs, &walls);
         self.domain.load_state(&r.f64s("domain")?)?;
         // the pairs' periodic images follow from the positions at the last build
-        let hinv = self
-            .domain
-            .h()
-            .try_inverse()
-            .unwrap_or_else(crate::M3::zeros);
-        let xb: Vec<crate::V3> = self.nl.x_build.iter().map(crate::neighbor::widen).collect();
-        self.nl.set_images(&xb, &self.domain, &hinv);
+        if r.has("nl.pair_img") && r.has("nl.moved") {
+            let img = r.u32s("nl.pair_img")?;
+            if img.len() != self.nl.pair_j.len() || img.iter().any(|&c| c >= 27) {
+                return Err(bad("pair image codes do not match the pair list".into()));
+            }
+            self.nl.pair_img = img.iter().map(|&c| c as u8).collect();
+            let m = r.f64s("nl.moved")?;
+            self.nl.moved = m[0];
+            self.nl.inner_eps = m[1];
+            self.nl.by_speed = m[2] != 0.0;
+        } else {
+            // an older checkpoint: the images follow from the positions at the last build;
+            // the displacement since then is not known, so the list is rebuilt
+            let hinv = self
+                .domain
+                .h()
+                .try_inverse()
+                .unwrap_or_else(crate::M3::zeros);
+            let xb: Vec<crate::V3> =
+                self.nl.x_build.iter().map(crate::neighbor::widen).collect();
+            self.nl.set_images(&xb, &self.domain, &hinv);
+            if D::PLAIN_NVE {
+                self.nl.valid = false;
+            }
+        }
         for (k, c) in r.f64s("walls.impulse")?.chunks_exact(3).enumerate() {
             self.wall_impulse[k] = crate::V3::new(c[0], c[1], c[2]);
         }
