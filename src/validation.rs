@@ -432,6 +432,54 @@ fn deferred_cross_pass_changes_no_bits() {
     }
 }
 
+/// A walled frictional gas with gravity run with the inner list pruned to last `prune_steps`
+/// steps (0: not pruned): positions, velocities and spins by id, and (prunes, builds, mean
+/// inner / listed pairs).
+fn pruned_run(prune_steps: f64) -> (Vec<[f64; 9]>, u64, u64, f64) {
+    use crate::engine::{Gravity, Plane, PlaneWalls};
+    let l = 10.0;
+    let mut p = gas(0.35, l, 17, SizeDist::Uniform(0.9, 1.1));
+    for x in p.x.iter_mut() {
+        x.x = 0.6 + x.x * ((l - 1.2) / l);
+    }
+    let law = LawParams::new(1e5, 0.7, 0.5);
+    let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
+    let walls = PlaneWalls::<Hooke, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
+    let mut s = Engine::new(p, law, bx, walls, Gravity(V3::new(-2.0, -1.0, 0.0)), None, 0.2)
+        .unwrap();
+    s.prune_steps = prune_steps;
+    let (q0, b0) = (s.nl.prunes, s.nl.builds);
+    let mut frac = 0.0;
+    for _ in 0..20 {
+        s.run(100).unwrap();
+        frac += s.nl.inner_len() as f64 / s.nl.len() as f64 / 20.0;
+    }
+    let mut out = vec![[0.0; 9]; s.p.len()];
+    for i in 0..s.p.len() {
+        let (x, v, w) = (s.p.x[i], s.p.v[i], s.p.omega[i]);
+        out[s.p.id[i] as usize] = [x.x, x.y, x.z, v.x, v.y, v.z, w.x, w.y, w.z];
+    }
+    (out, s.nl.prunes - q0, s.nl.builds - b0, frac)
+}
+
+#[test]
+fn pruning_changes_no_bits() {
+    // The force loop tests only the pairs kept at the last prune; as long as no particle
+    // can have closed the gap since, it sees exactly the contacts of the whole list, in the
+    // same order: any pruning interval gives the same bits as none.
+    let (a, qa, ba, fa) = pruned_run(0.0);
+    // (one more: the engine's first inner list was pruned before pruning was turned off)
+    assert!(qa <= ba + 1, "without pruning the inner list follows the list: {qa} > {ba} + 1");
+    assert!(fa > 0.999);
+    for k in [1.0, 4.0, crate::engine::DEFAULT_PRUNE_STEPS] {
+        let (b, qb, bb, fb) = pruned_run(k);
+        assert!(qb > 2 * bb, "prune_steps {k}: {qb} prunes for {bb} builds");
+        assert!(fb < 0.9, "prune_steps {k}: the inner list kept {fb} of the pairs");
+        let differ = a.iter().zip(&b).filter(|(u, v)| u != v).count();
+        assert_eq!(differ, 0, "prune_steps {k} changed the trajectory of {differ} particles");
+    }
+}
+
 /// Positions, velocities and (one statistics step) the per-particle stress records of a
 /// walled Hertz channel with gravity, and positions of a frictionless periodic packing.
 fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Vec<V3>) {
