@@ -735,7 +735,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 };
                 // (the cross index exists only while a pass is pending: a restored state
                 // has none until its first prune)
-                let cx = pending.then(|| CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, h));
+                let cx =
+                    pending.then(|| CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, h));
                 let pend = cx.as_ref();
                 kick_drift_pack_chunk::<T>(KickChunk {
                     x,

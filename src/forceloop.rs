@@ -66,8 +66,6 @@ pub(crate) struct ChunkIo<'a, H> {
 /// R_i + R_j): one 16-byte and one 32-byte record, each written with one store.
 #[derive(Default)]
 struct Scratch {
-    /// Owner of each listed pair of the block (AVX2 pass 1).
-    own: Vec<u32>,
     ids: Vec<[u32; 4]>,
     rec: Vec<[f64; 4]>,
     /// New tangential displacements (pass 2).
@@ -81,7 +79,6 @@ impl Scratch {
     fn fit(&mut self, contacts: usize) {
         let want = contacts + LANES;
         if self.ids.len() < want {
-            self.own.resize(want, 0);
             self.ids.resize(want, [0; 4]);
             self.rec.resize(want, [0.0; 4]);
             for v in [&mut self.ux, &mut self.uy, &mut self.uz] {
@@ -602,12 +599,11 @@ mod avx {
     ) -> usize {
         let xr = s.xr;
         let (pair_j, pair_img, pair_key) = (&ic.j[..], &ic.img[..], &ic.key[..]);
+        let own = &ic.own[..];
         let (kb, ke) = (ic.start[l0] as usize, ic.start[l1] as usize);
-        // the owner of every pair of the block (the list is stored by owner)
-        for l in l0..l1 {
-            let (k0, k1) = (ic.start[l] as usize, ic.start[l + 1] as usize);
-            sc.own[k0 - kb..k1 - kb].fill((i0 + l) as u32);
-        }
+        assert!(ke <= pair_j.len() && ke <= pair_img.len());
+        assert!(ke <= pair_key.len() && ke <= own.len());
+        let i0 = i0 as u32;
         let mut nc = 0usize;
         // cross slots stay open (u32::MAX) unless pass 2 finds them closed
         let mut x = *xs;
@@ -617,13 +613,13 @@ mod avx {
         let mut k = kb;
         while k < ke {
             let m = (ke - k).min(4);
-            // SAFETY: k + 4 <= ke <= the list length on the fast path; otherwise lanes past
-            // the block's pairs repeat its last pair (masked off below); own holds the
-            // block's pairs
+            // SAFETY: k + 4 <= ke <= the lists' lengths (asserted) on the fast path;
+            // otherwise lanes past the block's pairs repeat its last pair (masked off below)
             let (is, js, cs, ks) = unsafe {
                 if m == 4 {
                     (
-                        std::ptr::read_unaligned(sc.own.as_ptr().add(k - kb) as *const [u32; 4]),
+                        std::ptr::read_unaligned(own.as_ptr().add(k) as *const [u16; 4])
+                            .map(|o| i0 + o as u32),
                         std::ptr::read_unaligned(pair_j.as_ptr().add(k) as *const [u32; 4]),
                         std::ptr::read_unaligned(pair_img.as_ptr().add(k) as *const [u8; 4]),
                         std::ptr::read_unaligned(pair_key.as_ptr().add(k) as *const [u32; 4]),
@@ -631,7 +627,7 @@ mod avx {
                 } else {
                     let kl = |l: usize| k + l.min(m - 1);
                     (
-                        [0, 1, 2, 3].map(|l| *sc.own.get_unchecked(kl(l) - kb)),
+                        [0, 1, 2, 3].map(|l| i0 + *own.get_unchecked(kl(l)) as u32),
                         [0, 1, 2, 3].map(|l| *pair_j.get_unchecked(kl(l))),
                         [0, 1, 2, 3].map(|l| *pair_img.get_unchecked(kl(l))),
                         [0, 1, 2, 3].map(|l| *pair_key.get_unchecked(kl(l))),

@@ -391,7 +391,9 @@ impl NeighborList {
         let (own_start, pair_j, pair_img) = (&self.own_start, &self.pair_j, &self.pair_img);
         self.inner.par_iter_mut().enumerate().for_each(|(c, ic)| {
             let (i0, i1) = (c * ch, ((c + 1) * ch).min(n));
-            prune_chunk(ic, i0, i1, own_start, pair_j, pair_img, xr, shifts, inner_skin);
+            prune_chunk(
+                ic, i0, i1, own_start, pair_j, pair_img, xr, shifts, inner_skin,
+            );
         });
         self.build_cross(n);
         self.inner_skin = inner_skin;
@@ -482,10 +484,14 @@ fn prune_chunk(
         for i in i0..i1 {
             let [xi0, xi1, xi2, ri] = xr[i];
             let (k0, k1) = (own_start[i] as usize - kb, own_start[i + 1] as usize - kb);
-            for k in k0..k1.min(m) {
-                let (j, img) = (pj[k], pi[k]);
-                let [xj0, xj1, xj2, rj] = xr[j as usize];
-                let sh = &shifts[img as usize % 27];
+            assert!(k0 <= k1 && k1 <= m);
+            for k in k0..k1 {
+                // SAFETY: k < m, the length of pj, pi and keys; list partners are < n (the
+                // list is built from 0..n, checked in debug builds); image codes < 27
+                let (j, img) = unsafe { (*pj.get_unchecked(k), *pi.get_unchecked(k)) };
+                debug_assert!((j as usize) < xr.len() && img < 27);
+                let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j as usize) };
+                let sh = unsafe { shifts.get_unchecked(img as usize) };
                 let (dx, dy, dz) = (xi0 - xj0 - sh[0], xi1 - xj1 - sh[1], xi2 - xj2 - sh[2]);
                 let r2 = dx * dx + dy * dy + dz * dz;
                 let cut = ri + rj + inner_skin;
@@ -493,7 +499,7 @@ fn prune_chunk(
                 #[allow(clippy::neg_cmp_op_on_partial_ord)]
                 let keep = !(r2 >= cut * cut);
                 // written at the next free place (len <= k < m), kept by advancing it
-                keys[len.min(m - 1)] = k as u32;
+                unsafe { *keys.get_unchecked_mut(len) = k as u32 };
                 len += keep as usize;
                 ncross += (keep && j as usize >= i1) as u32;
             }
@@ -506,6 +512,12 @@ fn prune_chunk(
         }
         ic.img.clear();
         ic.img.reserve_exact(len);
+        ic.own.clear();
+        ic.own.reserve_exact(len);
+        for (l, w) in ic.start.windows(2).enumerate() {
+            ic.own
+                .extend(std::iter::repeat_n(l as u16, (w[1] - w[0]) as usize));
+        }
         ic.key.extend_from_slice(keys);
         ic.j.extend(keys.iter().map(|&k| pj[k as usize]));
         ic.img.extend(keys.iter().map(|&k| pi[k as usize]));
@@ -527,13 +539,20 @@ pub struct InnerChunk {
     pub j: Vec<u32>,
     pub img: Vec<u8>,
     pub key: Vec<u32>,
+    /// First particle of each pair, counted from the chunk's first particle (chunks hold at
+    /// most 4096 particles).
+    pub own: Vec<u16>,
     /// Pairs whose second particle lies in a later chunk.
     pub ncross: u32,
 }
 
 impl InnerChunk {
     pub fn bytes(&self) -> usize {
-        self.start.capacity() * 4 + self.j.capacity() * 4 + self.img.capacity() + self.key.capacity() * 4
+        self.start.capacity() * 4
+            + self.j.capacity() * 4
+            + self.img.capacity()
+            + self.key.capacity() * 4
+            + self.own.capacity() * 2
     }
 }
 

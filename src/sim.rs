@@ -102,7 +102,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             ),
             format!("domain: {}", D::NAME),
             "integrator: velocity Verlet (translation + rotation)".to_string(),
-            "neighbours: cell list + Verlet list with skin".to_string(),
+            if D::PLAIN_NVE {
+                "neighbours: cell list + Verlet list with skin, pruned to the pairs near contact \
+                 every few steps (the lists' lifetimes from the largest speed)"
+                    .to_string()
+            } else {
+                "neighbours: cell list + Verlet list with skin".to_string()
+            },
         ];
         if W::ON {
             c.push(format!("walls: {} planes", self.walls.planes().len()));
@@ -327,7 +333,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             "nl.pair_img",
             &nl.pair_img.iter().map(|&c| c as u32).collect::<Vec<_>>(),
         );
-        w.f64s("nl.moved", &[nl.moved, nl.inner_eps, nl.by_speed as u8 as f64]);
+        w.f64s(
+            "nl.moved",
+            &[nl.moved, nl.inner_eps, nl.by_speed as u8 as f64],
+        );
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
         // contact histories by particle ids (placed back into the list on loading)
         let (hp, hw) = self.carried_histories();
@@ -486,8 +495,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 .h()
                 .try_inverse()
                 .unwrap_or_else(crate::M3::zeros);
-            let xb: Vec<crate::V3> =
-                self.nl.x_build.iter().map(crate::neighbor::widen).collect();
+            let xb: Vec<crate::V3> = self.nl.x_build.iter().map(crate::neighbor::widen).collect();
             self.nl.set_images(&xb, &self.domain, &hinv);
             if D::PLAIN_NVE {
                 self.nl.valid = false;

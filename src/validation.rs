@@ -445,8 +445,16 @@ fn pruned_run(prune_steps: f64) -> (Vec<[f64; 9]>, u64, u64, f64) {
     let law = LawParams::new(1e5, 0.7, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
     let walls = PlaneWalls::<Hooke, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
-    let mut s = Engine::new(p, law, bx, walls, Gravity(V3::new(-2.0, -1.0, 0.0)), None, 0.2)
-        .unwrap();
+    let mut s = Engine::new(
+        p,
+        law,
+        bx,
+        walls,
+        Gravity(V3::new(-2.0, -1.0, 0.0)),
+        None,
+        0.2,
+    )
+    .unwrap();
     s.prune_steps = prune_steps;
     let (q0, b0) = (s.nl.prunes, s.nl.builds);
     let mut frac = 0.0;
@@ -469,14 +477,23 @@ fn pruning_changes_no_bits() {
     // same order: any pruning interval gives the same bits as none.
     let (a, qa, ba, fa) = pruned_run(0.0);
     // (one more: the engine's first inner list was pruned before pruning was turned off)
-    assert!(qa <= ba + 1, "without pruning the inner list follows the list: {qa} > {ba} + 1");
+    assert!(
+        qa <= ba + 1,
+        "without pruning the inner list follows the list: {qa} > {ba} + 1"
+    );
     assert!(fa > 0.999);
     for k in [1.0, 4.0, crate::engine::DEFAULT_PRUNE_STEPS] {
         let (b, qb, bb, fb) = pruned_run(k);
         assert!(qb > 2 * bb, "prune_steps {k}: {qb} prunes for {bb} builds");
-        assert!(fb < 0.9, "prune_steps {k}: the inner list kept {fb} of the pairs");
+        assert!(
+            fb < 0.9,
+            "prune_steps {k}: the inner list kept {fb} of the pairs"
+        );
         let differ = a.iter().zip(&b).filter(|(u, v)| u != v).count();
-        assert_eq!(differ, 0, "prune_steps {k} changed the trajectory of {differ} particles");
+        assert_eq!(
+            differ, 0,
+            "prune_steps {k} changed the trajectory of {differ} particles"
+        );
     }
 }
 
