@@ -433,19 +433,18 @@ impl NeighborList {
         self.cross_slot.resize(total as usize, 0);
         self.cross_src.clear();
         self.cross_src.resize(total as usize, 0);
-        // reuse cross_start's tail as the fill pointers: fill[j] = cross_start[j] + done
+        // where the next cross pair of each second particle goes (kept between prunes)
         let mut fill = std::mem::take(&mut self.cross_fill);
         fill.clear();
         fill.extend_from_slice(&self.cross_start[..n]);
         for (c, ic) in self.inner.iter().enumerate() {
             let end = ((c + 1) * ch).min(n) as u32;
-            let mut s = self.cross_off[c];
-            for &j in ic.j.iter().filter(|&&j| j >= end) {
+            let slots = self.cross_off[c]..;
+            for (s, &j) in slots.zip(ic.j.iter().filter(|&&j| j >= end)) {
                 let f = &mut fill[j as usize];
                 self.cross_slot[*f as usize] = s;
                 self.cross_src[*f as usize] = c as u16;
                 *f += 1;
-                s += 1;
             }
         }
         self.cross_fill = fill;
