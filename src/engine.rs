@@ -1235,6 +1235,40 @@ fn cross_kick<const STATS: bool, T: Friction>(k: CrossChunk) {
     }
 }
 
+/// The cross pairs in contact of particle l of a chunk added onto (f, t), in list order
+/// (and their statistics onto ps[l] with STATS).
+///
+/// # Safety
+/// l < the length of s.rad (and ps with STATS); l + 1 < s.cs.len().
+#[inline(always)]
+unsafe fn cross_sum<const STATS: bool, T: Friction>(
+    l: usize,
+    f: &mut V3,
+    t: &mut V3,
+    ps: &mut [[f64; 10]],
+    s: &CrossSrc,
+) {
+    unsafe {
+        let (a, b) = (
+            *s.cs.get_unchecked(l) as usize,
+            *s.cs.get_unchecked(l + 1) as usize,
+        );
+        for (&sl, &src) in s.slot[a..b].iter().zip(&s.src[a..b]) {
+            let e = s.cidx[sl as usize];
+            if e != u32::MAX {
+                let o = &s.cross[src as usize][e as usize];
+                *f -= o.f;
+                if T::FRICTIONAL {
+                    *t += *s.rad.get_unchecked(l) * o.q;
+                }
+                if STATS {
+                    add10(&mut ps[l], &s.cstat[src as usize][e as usize]);
+                }
+            }
+        }
+    }
+}
+
 /// Phase 2 for particle l of a chunk: its cross pairs, then (`kick` > 0) its final half-kick.
 ///
 /// # Safety
@@ -1250,31 +1284,9 @@ unsafe fn cross_one<const STATS: bool, T: Friction>(
     s: &CrossSrc,
 ) {
     unsafe {
-        let (a, b) = (
-            *s.cs.get_unchecked(l) as usize,
-            *s.cs.get_unchecked(l + 1) as usize,
-        );
         let fl = fo.get_unchecked_mut(l);
         let tl = to.get_unchecked_mut(l);
-        if a < b {
-            let mut f = *fl;
-            let mut t = *tl;
-            for (&sl, &src) in s.slot[a..b].iter().zip(&s.src[a..b]) {
-                let e = s.cidx[sl as usize];
-                if e != u32::MAX {
-                    let o = &s.cross[src as usize][e as usize];
-                    f -= o.f;
-                    if T::FRICTIONAL {
-                        t += *s.rad.get_unchecked(l) * o.q;
-                    }
-                    if STATS {
-                        add10(&mut ps[l], &s.cstat[src as usize][e as usize]);
-                    }
-                }
-            }
-            *fl = f;
-            *tl = t;
-        }
+        cross_sum::<STATS, T>(l, fl, tl, ps, s);
         if s.kick > 0.0 {
             // the arithmetic of nve_final
             *vo.get_unchecked_mut(l) += *fl * (s.kick * *s.im.get_unchecked(l));
@@ -1353,24 +1365,35 @@ fn kdp<T: Friction>(k: KickChunk) -> f64 {
     }
     let mut vm = 0.0f64;
     for l in 0..n {
+        // every value read and written once, kept in registers in between
+        let (mut fl, mut tl, mut vl, mut wl) = (f[l], t[l], v[l], w[l]);
+        let (hm, hi) = (h * im[l], h * ii[l]);
         if let Some(cx) = pend {
+            // the last step's cross pairs and final half-kick (the arithmetic of cross_one)
             // SAFETY: l < n, the length of every per-particle slice (asserted above)
-            unsafe { cross_one::<false, T>(l, f, t, v, w, &mut [], cx) };
+            unsafe { cross_sum::<false, T>(l, &mut fl, &mut tl, &mut [], cx) };
+            f[l] = fl;
+            vl += fl * (cx.kick * cx.im[l]);
+            if T::FRICTIONAL {
+                t[l] = tl;
+                wl += tl * (cx.kick * cx.ii[l]);
+            }
         }
-        let vn = v[l] + f[l] * (h * im[l]);
+        let vn = vl + fl * hm;
         v[l] = vn;
-        x[l] += vn * dt;
+        let xn = x[l] + vn * dt;
+        x[l] = xn;
         vm = vm.max(vn.norm_squared());
         // without friction there are no torques: spins never change
         if T::FRICTIONAL {
-            w[l] += t[l] * (h * ii[l]);
+            wl += tl * hi;
+            w[l] = wl;
         }
-        a[l] = xr_record(&x[l], rad[l]);
+        a[l] = xr_record(&xn, rad[l]);
         b[l] = if T::FRICTIONAL {
-            kin_record(&vn, &w[l], &f[l], &t[l], im[l], ii[l], h, rad[l])
+            kin_record(&vn, &wl, &fl, &tl, im[l], ii[l], h, rad[l])
         } else {
-            let vp = vn + (h * im[l]) * f[l];
-            let wl = w[l];
+            let vp = vn + hm * fl;
             [vp.x, vp.y, vp.z, im[l], wl.x, wl.y, wl.z, rad[l]]
         };
     }
