@@ -276,63 +276,87 @@ impl NeighborList {
         let rad = &p.radius;
         let start_ref = &start;
         let hinv = dom.h().try_inverse().unwrap_or_else(M3::zeros);
-        let chunks: Vec<(Vec<u32>, Vec<u32>)> = (0..n.div_ceil(BUILD_CHUNK))
+        let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<u8>)> = (0..n.div_ceil(BUILD_CHUNK))
             .into_par_iter()
             .map(|ch| {
                 let lo = ch * BUILD_CHUNK;
                 let hi = ((ch + 1) * BUILD_CHUNK).min(n);
                 let mut counts = Vec::with_capacity(hi - lo);
                 let mut js = Vec::with_capacity((hi - lo) * 8);
-                let mut cand: Vec<u32> = Vec::with_capacity(64);
+                let mut imgs = Vec::with_capacity((hi - lo) * 8);
+                // particle ranges of the neighbour cells after the current one along the
+                // curve (j > i), in curve order and merged where contiguous: the partners
+                // come out sorted
+                let mut runs: Vec<(usize, usize)> = Vec::with_capacity(27);
+                let mut ranks: Vec<usize> = Vec::with_capacity(27);
+                let mut cur = usize::MAX;
                 let tabs = &tabs;
                 for i in lo..hi {
                     let c = cell_sorted[i] as usize;
-                    let cx = c % nb[0];
-                    let cy = (c / nb[0]) % nb[1];
-                    let cz = c / (nb[0] * nb[1]);
-                    cand.clear();
-                    let (tz, nz) = tabs[2][cz];
-                    let (ty, ny) = tabs[1][cy];
-                    let (tx, nx) = tabs[0][cx];
-                    for &oz in &tz[..nz] {
-                        for &oy in &ty[..ny] {
-                            for &ox in &tx[..nx] {
-                                let cc = rank_of[(oz * nb[1] + oy) * nb[0] + ox] as usize;
-                                let (a, b) = (start_ref[cc] as usize, start_ref[cc + 1] as usize);
-                                let xi = x[i];
-                                let ri = rad[i] + skin;
-                                for j in a.max(i + 1)..b.max(i + 1) {
-                                    let d = dom.delta(&xi, &x[j]);
-                                    let rc = ri + rad[j];
-                                    if d.norm_squared() < rc * rc {
-                                        cand.push(j as u32);
+                    let own = rank_of[c] as usize;
+                    if c != cur {
+                        cur = c;
+                        let (cx, cy, cz) = (c % nb[0], (c / nb[0]) % nb[1], c / (nb[0] * nb[1]));
+                        let (tz, nz) = tabs[2][cz];
+                        let (ty, ny) = tabs[1][cy];
+                        let (tx, nx) = tabs[0][cx];
+                        ranks.clear();
+                        for &oz in &tz[..nz] {
+                            for &oy in &ty[..ny] {
+                                for &ox in &tx[..nx] {
+                                    let r = rank_of[(oz * nb[1] + oy) * nb[0] + ox] as usize;
+                                    if r > own {
+                                        ranks.push(r);
                                     }
                                 }
                             }
                         }
+                        ranks.sort_unstable();
+                        runs.clear();
+                        for &r in &ranks {
+                            let (a, b) = (start_ref[r] as usize, start_ref[r + 1] as usize);
+                            match runs.last_mut() {
+                                Some(last) if last.1 == a => last.1 = b,
+                                _ if a < b => runs.push((a, b)),
+                                _ => {}
+                            }
+                        }
                     }
-                    cand.sort_unstable();
-                    counts.push(cand.len() as u32);
-                    js.extend_from_slice(&cand);
+                    let xi = x[i];
+                    let ri = rad[i] + skin;
+                    let before = js.len();
+                    let own_run = (i + 1, start_ref[own + 1] as usize);
+                    for &(a, b) in std::iter::once(&own_run).chain(&runs) {
+                        for j in a..b {
+                            let d = dom.delta(&xi, &x[j]);
+                            let rc = ri + rad[j];
+                            if d.norm_squared() < rc * rc {
+                                js.push(j as u32);
+                                imgs.push(image_code(&hinv, &((xi - x[j]) - d)));
+                            }
+                        }
+                    }
+                    counts.push((js.len() - before) as u32);
                 }
-                (counts, js)
+                (counts, js, imgs)
             })
             .collect();
 
         // 5. CSR (exact capacities: no growth slack in the largest arrays)
         let np_total: usize = chunks.iter().map(|c| c.1.len()).sum();
         self.pair_j = Vec::with_capacity(np_total);
+        self.pair_img = Vec::with_capacity(np_total);
         self.own_start.clear();
         self.own_start.reserve(n + 1);
         self.own_start.push(0);
-        for (counts, js) in &chunks {
+        for (counts, js, imgs) in &chunks {
             for &c in counts {
                 let s = *self.own_start.last().unwrap();
                 self.own_start.push(s + c);
             }
             self.pair_j.extend_from_slice(js);
+            self.pair_img.extend_from_slice(imgs);
         }
-        self.set_images(&p.x, dom, &hinv);
         self.inner_valid = false;
 
         let xmax = p.x.iter().map(|x| x.amax()).fold(0.0f64, f64::max);
@@ -364,9 +388,7 @@ impl NeighborList {
             for (slot, &j) in img[a..b].iter_mut().zip(&self.pair_j[a..b]) {
                 let j = j as usize;
                 let shift = (x[i] - x[j]) - dom.delta(&x[i], &x[j]);
-                let s = hinv * shift;
-                let c = |a: f64| (a.round().clamp(-1.0, 1.0) + 1.0) as u8;
-                *slot = 9 * c(s[0]) + 3 * c(s[1]) + c(s[2]);
+                *slot = image_code(hinv, &shift);
             }
         }
         self.pair_img = img;
@@ -553,6 +575,14 @@ impl InnerChunk {
             + self.key.capacity() * 4
             + self.own.capacity() * 2
     }
+}
+
+/// Image code (see `NeighborList::pair_img`) of a lattice shift H n.
+#[inline]
+fn image_code(hinv: &M3, shift: &V3) -> u8 {
+    let s = hinv * shift;
+    let c = |a: f64| (a.round().clamp(-1.0, 1.0) + 1.0) as u8;
+    9 * c(s[0]) + 3 * c(s[1]) + c(s[2])
 }
 
 /// A stored single-precision position as a vector.
