@@ -925,6 +925,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.nl.prune(&self.xr, &shifts, s_in);
         self.cross_idx.clear();
         self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
+        // the contact lists grow by doubling during the sweeps: give the excess back
+        self.trim();
     }
 
     /// Finish a step whose cross-chunk pass and final half-kick were deferred.

@@ -22,7 +22,7 @@ use crate::V3;
 use std::cell::RefCell;
 
 /// Particles per block: the block's contacts stay in L1.
-const BLOCK: usize = 32;
+use crate::neighbor::BLOCK;
 /// Contacts per lane group of the law.
 const LANES: usize = 4;
 
@@ -159,7 +159,7 @@ where
     let i0 = c * s.ch;
     let i1 = i0 + fo.len();
     let ic = &s.inner[c];
-    assert_eq!(ic.start.len(), fo.len() + 1);
+    assert_eq!(ic.block.len(), fo.len().div_ceil(BLOCK) + 1);
     let mut xs = 0usize;
     let mut hc = Cursor::new(hold);
     let mut wc = Cursor::new(wold);
@@ -179,17 +179,20 @@ where
         let mut b0 = i0;
         while b0 < i1 {
             let b1 = (b0 + BLOCK).min(i1);
-            sc.fit((ic.start[b1 - i0] - ic.start[b0 - i0]) as usize);
+            // the block's pairs in the inner list
+            let bi = (b0 - i0) / BLOCK;
+            let (kb, ke) = (ic.block[bi] as usize, ic.block[bi + 1] as usize);
+            sc.fit(ke - kb);
             let nc = if AVX {
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs.
                 unsafe {
-                    avx::filter(s, ic, sc, b0 - i0, b1 - i0, i0, i1, &mut xs)
+                    avx::filter(s, ic, sc, kb, ke, i0, i1, &mut xs)
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 unreachable!()
             } else {
-                filter(s, ic, sc, b0 - i0, b1 - i0, i0, i1, &mut xs)
+                filter(s, ic, sc, kb, ke, i0, i1, &mut xs)
             };
             out.contacts += nc;
             let mut sums = Sums {
@@ -213,53 +216,50 @@ where
     out
 }
 
-/// Pass 1 (baseline): the distance test over the inner list's pairs of the block's particles
-/// (chunk-local indices l0..l1; the chunk is particles i0..i1), contacts appended in list
-/// order. Returns their number. Cross slots are numbered in list order, open ones included.
+/// Pass 1 (baseline): the distance test over the inner list's pairs kb..ke (a block of the
+/// chunk of particles i0..i1), contacts appended in list order. Returns their number. Cross
+/// slots are numbered in list order, open ones included.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn filter<F: Form, T: Friction, D>(
     s: &Shared<F, T, D>,
     ic: &InnerChunk,
     sc: &mut Scratch,
-    l0: usize,
-    l1: usize,
+    kb: usize,
+    ke: usize,
     i0: usize,
     i1: usize,
     xs: &mut usize,
 ) -> usize {
     let xr = s.xr;
     let mut nc = 0usize;
-    for l in l0..l1 {
-        let i = i0 + l;
-        let (k0, k1) = (ic.start[l] as usize, ic.start[l + 1] as usize);
-        let [xi0, xi1, xi2, ri] = xr[i];
-        for k in k0..k1 {
-            // SAFETY: list indices are < n by construction (built from 0..n); the scratch
-            // holds at least the block's pairs (`fit`); k < the inner list's length
-            let j = unsafe { *ic.j.get_unchecked(k) } as usize;
-            let is_cross = j >= i1;
-            let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
-            let sh = unsafe { s.shifts.get_unchecked(*ic.img.get_unchecked(k) as usize) };
-            let dx = xi0 - xj0 - sh[0];
-            let dy = xi1 - xj1 - sh[1];
-            let dz = xi2 - xj2 - sh[2];
-            let r2 = dx * dx + dy * dy + dz * dz;
-            let rs = ri + rj;
-            if r2 >= rs * rs {
-                // open: nothing stored (its history, if any, is not carried on)
-                *xs += is_cross as usize;
-                continue;
-            }
-            let slot = if is_cross { *xs as u32 } else { u32::MAX };
-            unsafe {
-                let key = *ic.key.get_unchecked(k);
-                *sc.ids.get_unchecked_mut(nc) = [i as u32, j as u32, key, slot];
-                *sc.rec.get_unchecked_mut(nc) = [dx, dy, dz, rs];
-            }
+    let (own, pj, pi, pk) = (&ic.own[kb..ke], &ic.j[kb..ke], &ic.img[kb..ke], &ic.key[kb..ke]);
+    for k in 0..ke - kb {
+        let i = i0 + own[k] as usize;
+        let j = pj[k] as usize;
+        let is_cross = j >= i1;
+        // SAFETY: list indices are < n by construction (built from 0..n); image codes < 27;
+        // the scratch holds at least the block's pairs (`fit`)
+        let [xi0, xi1, xi2, ri] = unsafe { *xr.get_unchecked(i) };
+        let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
+        let sh = unsafe { s.shifts.get_unchecked(pi[k] as usize) };
+        let dx = xi0 - xj0 - sh[0];
+        let dy = xi1 - xj1 - sh[1];
+        let dz = xi2 - xj2 - sh[2];
+        let r2 = dx * dx + dy * dy + dz * dz;
+        let rs = ri + rj;
+        if r2 >= rs * rs {
+            // open: nothing stored (its history, if any, is not carried on)
             *xs += is_cross as usize;
-            nc += 1;
+            continue;
         }
+        let slot = if is_cross { *xs as u32 } else { u32::MAX };
+        unsafe {
+            *sc.ids.get_unchecked_mut(nc) = [i as u32, j as u32, pk[k], slot];
+            *sc.rec.get_unchecked_mut(nc) = [dx, dy, dz, rs];
+        }
+        *xs += is_cross as usize;
+        nc += 1;
     }
     nc
 }
@@ -591,8 +591,8 @@ mod avx {
         s: &Shared<F, T, D>,
         ic: &InnerChunk,
         sc: &mut Scratch,
-        l0: usize,
-        l1: usize,
+        kb: usize,
+        ke: usize,
         i0: usize,
         i1: usize,
         xs: &mut usize,
@@ -600,7 +600,6 @@ mod avx {
         let xr = s.xr;
         let (pair_j, pair_img, pair_key) = (&ic.j[..], &ic.img[..], &ic.key[..]);
         let own = &ic.own[..];
-        let (kb, ke) = (ic.start[l0] as usize, ic.start[l1] as usize);
         assert!(ke <= pair_j.len() && ke <= pair_img.len());
         assert!(ke <= pair_key.len() && ke <= own.len());
         let i0 = i0 as u32;

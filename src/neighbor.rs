@@ -13,6 +13,10 @@ use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
 
+/// Particles per block of the force loop (`crate::forceloop`): the inner list keeps the
+/// offsets of its pairs per block.
+pub const BLOCK: usize = 32;
+
 /// Particles per work unit when building; fixed so that results do not depend on thread count.
 const BUILD_CHUNK: usize = 512;
 /// Particles per work unit of the force loop, from the number of particles alone (never from
@@ -496,13 +500,15 @@ fn prune_chunk(
         if sc.len() < m {
             sc.resize(m, 0);
         }
-        ic.start.clear();
-        ic.start.push(0);
+        ic.block.clear();
         let (pj, pi) = (&pair_j[kb..ke], &pair_img[kb..ke]);
         let keys = &mut sc[..m];
         let mut len = 0usize;
         let mut ncross = 0u32;
         for i in i0..i1 {
+            if (i - i0).is_multiple_of(BLOCK) {
+                ic.block.push(len as u32);
+            }
             let [xi0, xi1, xi2, ri] = xr[i];
             let (k0, k1) = (own_start[i] as usize - kb, own_start[i + 1] as usize - kb);
             assert!(k0 <= k1 && k1 <= m);
@@ -524,8 +530,8 @@ fn prune_chunk(
                 len += keep as usize;
                 ncross += (keep && j as usize >= i1) as u32;
             }
-            ic.start.push(len as u32);
         }
+        ic.block.push(len as u32);
         let keys = &keys[..len];
         for v in [&mut ic.key, &mut ic.j] {
             v.clear();
@@ -535,10 +541,14 @@ fn prune_chunk(
         ic.img.reserve_exact(len);
         ic.own.clear();
         ic.own.reserve_exact(len);
-        for (l, w) in ic.start.windows(2).enumerate() {
-            ic.own
-                .extend(std::iter::repeat_n(l as u16, (w[1] - w[0]) as usize));
-        }
+        // the owner of each kept pair, from the list's offsets
+        let mut l = 0usize;
+        ic.own.extend(keys.iter().map(|&k| {
+            while (own_start[i0 + l + 1] as usize - kb) <= k as usize {
+                l += 1;
+            }
+            l as u16
+        }));
         ic.key.extend_from_slice(keys);
         ic.j.extend(keys.iter().map(|&k| pj[k as usize]));
         ic.img.extend(keys.iter().map(|&k| pi[k as usize]));
@@ -553,8 +563,9 @@ thread_local! {
 /// One force-loop chunk's part of the inner list (see `NeighborList::prune`).
 #[derive(Clone, Debug, Default)]
 pub struct InnerChunk {
-    /// start[l]..start[l + 1]: the pairs of the chunk's particle l.
-    pub start: Vec<u32>,
+    /// block[b]..block[b + 1]: the pairs of the chunk's particles b BLOCK .. (b + 1) BLOCK
+    /// (a block of the force loop).
+    pub block: Vec<u32>,
     /// Second particle, image code and history key (the pair's index in the full list,
     /// counted from the chunk's first pair) of each pair.
     pub j: Vec<u32>,
@@ -569,7 +580,7 @@ pub struct InnerChunk {
 
 impl InnerChunk {
     pub fn bytes(&self) -> usize {
-        self.start.capacity() * 4
+        self.block.capacity() * 4
             + self.j.capacity() * 4
             + self.img.capacity()
             + self.key.capacity() * 4
