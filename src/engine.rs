@@ -1042,6 +1042,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             wlaw,
             g,
             inner: &nl.inner,
+            pair_j: &nl.pair_j,
+            pair_img: &nl.pair_img,
             shifts,
             xr,
             kin,

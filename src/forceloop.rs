@@ -33,8 +33,11 @@ pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
     pub planes: &'a [Plane],
     pub wlaw: Option<&'a Law<F, T>>,
     pub g: V3,
-    /// The pairs to test, per chunk (`NeighborList::prune`).
+    /// The pairs to test, per chunk (`NeighborList::prune`), and the full list's second
+    /// particles and image codes they point to.
     pub inner: &'a [InnerChunk],
+    pub pair_j: &'a [u32],
+    pub pair_img: &'a [u8],
     /// Periodic image shifts by image code, padded to 4 doubles.
     pub shifts: [[f64; 4]; 27],
     /// (x, R) per particle.
@@ -233,16 +236,20 @@ fn filter<F: Form, T: Friction, D>(
 ) -> usize {
     let xr = s.xr;
     let mut nc = 0usize;
-    let (own, pj, pi, pk) = (&ic.own[kb..ke], &ic.j[kb..ke], &ic.img[kb..ke], &ic.key[kb..ke]);
+    let (own, pk) = (&ic.own[kb..ke], &ic.key[kb..ke]);
+    let (pj, pi) = (
+        &s.pair_j[ic.base as usize..],
+        &s.pair_img[ic.base as usize..],
+    );
     for k in 0..ke - kb {
         let i = i0 + own[k] as usize;
-        let j = pj[k] as usize;
+        let j = pj[pk[k] as usize] as usize;
         let is_cross = j >= i1;
         // SAFETY: list indices are < n by construction (built from 0..n); image codes < 27;
         // the scratch holds at least the block's pairs (`fit`)
         let [xi0, xi1, xi2, ri] = unsafe { *xr.get_unchecked(i) };
         let [xj0, xj1, xj2, rj] = unsafe { *xr.get_unchecked(j) };
-        let sh = unsafe { s.shifts.get_unchecked(pi[k] as usize) };
+        let sh = unsafe { s.shifts.get_unchecked(pi[pk[k] as usize] as usize) };
         let dx = xi0 - xj0 - sh[0];
         let dy = xi1 - xj1 - sh[1];
         let dz = xi2 - xj2 - sh[2];
@@ -598,10 +605,17 @@ mod avx {
         xs: &mut usize,
     ) -> usize {
         let xr = s.xr;
-        let (pair_j, pair_img, pair_key) = (&ic.j[..], &ic.img[..], &ic.key[..]);
+        let pair_key = &ic.key[..];
         let own = &ic.own[..];
-        assert!(ke <= pair_j.len() && ke <= pair_img.len());
+        // the full list's partners and image codes of the chunk, indexed by key
+        let (pair_j, pair_img) = (
+            &s.pair_j[ic.base as usize..],
+            &s.pair_img[ic.base as usize..],
+        );
+        // keys are < span by construction (`prune_chunk`)
+        assert!(ic.span as usize <= pair_j.len().min(pair_img.len()));
         assert!(ke <= pair_key.len() && ke <= own.len());
+        debug_assert!(pair_key[kb..ke].iter().all(|&q| q < ic.span));
         let i0 = i0 as u32;
         let mut nc = 0usize;
         // cross slots stay open (u32::MAX) unless pass 2 finds them closed
@@ -614,24 +628,27 @@ mod avx {
             let m = (ke - k).min(4);
             // SAFETY: k + 4 <= ke <= the lists' lengths (asserted) on the fast path;
             // otherwise lanes past the block's pairs repeat its last pair (masked off below)
-            let (is, js, cs, ks) = unsafe {
+            let (is, ks) = unsafe {
                 if m == 4 {
                     (
                         std::ptr::read_unaligned(own.as_ptr().add(k) as *const [u16; 4])
                             .map(|o| i0 + o as u32),
-                        std::ptr::read_unaligned(pair_j.as_ptr().add(k) as *const [u32; 4]),
-                        std::ptr::read_unaligned(pair_img.as_ptr().add(k) as *const [u8; 4]),
                         std::ptr::read_unaligned(pair_key.as_ptr().add(k) as *const [u32; 4]),
                     )
                 } else {
                     let kl = |l: usize| k + l.min(m - 1);
                     (
                         [0, 1, 2, 3].map(|l| i0 + *own.get_unchecked(kl(l)) as u32),
-                        [0, 1, 2, 3].map(|l| *pair_j.get_unchecked(kl(l))),
-                        [0, 1, 2, 3].map(|l| *pair_img.get_unchecked(kl(l))),
                         [0, 1, 2, 3].map(|l| *pair_key.get_unchecked(kl(l))),
                     )
                 }
+            };
+            // SAFETY: keys < span <= the lengths (asserted above)
+            let (js, cs) = unsafe {
+                (
+                    ks.map(|q| *pair_j.get_unchecked(q as usize)),
+                    ks.map(|q| *pair_img.get_unchecked(q as usize)),
+                )
             };
             // SAFETY: i, j < n (the list is built from 0..n), image codes < 27
             let rec = unsafe {

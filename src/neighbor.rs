@@ -138,7 +138,7 @@ impl NeighborList {
 
     /// Pairs in the inner list.
     pub fn inner_len(&self) -> usize {
-        self.inner.iter().map(|c| c.j.len()).sum()
+        self.inner.iter().map(|c| c.key.len()).sum()
     }
 
     /// Number of cross pairs of the inner list (buffered between chunks).
@@ -444,7 +444,7 @@ impl NeighborList {
         self.cross_start.resize(n + 1, 0);
         for (c, ic) in self.inner.iter().enumerate() {
             let end = ((c + 1) * ch).min(n) as u32;
-            for &j in ic.j.iter().filter(|&&j| j >= end) {
+            for j in ic.partners(&self.pair_j).filter(|&j| j >= end) {
                 self.cross_start[j as usize + 1] += 1;
             }
         }
@@ -466,7 +466,7 @@ impl NeighborList {
         for (c, ic) in self.inner.iter().enumerate() {
             let end = ((c + 1) * ch).min(n) as u32;
             let slots = self.cross_off[c]..;
-            for (s, &j) in slots.zip(ic.j.iter().filter(|&&j| j >= end)) {
+            for (s, j) in slots.zip(ic.partners(&self.pair_j).filter(|&j| j >= end)) {
                 let f = &mut fill[j as usize];
                 self.cross_slot[*f as usize] = s;
                 self.cross_src[*f as usize] = c as u16;
@@ -533,12 +533,10 @@ fn prune_chunk(
         }
         ic.block.push(len as u32);
         let keys = &keys[..len];
-        for v in [&mut ic.key, &mut ic.j] {
-            v.clear();
-            v.reserve_exact(len);
-        }
-        ic.img.clear();
-        ic.img.reserve_exact(len);
+        ic.base = kb as u32;
+        ic.span = m as u32;
+        ic.key.clear();
+        ic.key.reserve_exact(len);
         ic.own.clear();
         ic.own.reserve_exact(len);
         // the owner of each kept pair, from the list's offsets
@@ -550,8 +548,6 @@ fn prune_chunk(
             l as u16
         }));
         ic.key.extend_from_slice(keys);
-        ic.j.extend(keys.iter().map(|&k| pj[k as usize]));
-        ic.img.extend(keys.iter().map(|&k| pi[k as usize]));
         ic.ncross = ncross;
     });
 }
@@ -566,11 +562,12 @@ pub struct InnerChunk {
     /// block[b]..block[b + 1]: the pairs of the chunk's particles b BLOCK .. (b + 1) BLOCK
     /// (a block of the force loop).
     pub block: Vec<u32>,
-    /// Second particle, image code and history key (the pair's index in the full list,
-    /// counted from the chunk's first pair) of each pair.
-    pub j: Vec<u32>,
-    pub img: Vec<u8>,
+    /// Each pair's index in the full list counted from the chunk's first pair (`base`): its
+    /// second particle and image code are read there, and it is the key of its history.
     pub key: Vec<u32>,
+    pub base: u32,
+    /// The chunk's pairs in the full list: every key is below it.
+    pub span: u32,
     /// First particle of each pair, counted from the chunk's first particle (chunks hold at
     /// most 4096 particles).
     pub own: Vec<u16>,
@@ -579,12 +576,14 @@ pub struct InnerChunk {
 }
 
 impl InnerChunk {
+    /// Second particle of each pair.
+    pub fn partners<'a>(&'a self, pair_j: &'a [u32]) -> impl Iterator<Item = u32> + 'a {
+        let pj = &pair_j[self.base as usize..];
+        self.key.iter().map(move |&k| pj[k as usize])
+    }
+
     pub fn bytes(&self) -> usize {
-        self.block.capacity() * 4
-            + self.j.capacity() * 4
-            + self.img.capacity()
-            + self.key.capacity() * 4
-            + self.own.capacity() * 2
+        self.block.capacity() * 4 + self.key.capacity() * 4 + self.own.capacity() * 2
     }
 }
 
