@@ -209,8 +209,27 @@ where
                 out: &mut out,
             };
             law_and_sums::<F, T, D, STATS, VIR, AVX>(s, sc, nc, &mut hc, hnew, &mut sums);
+            // which of the block's particles touch a wall (most touch none)
+            let touch = if W::ON {
+                if AVX {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs
+                    unsafe {
+                        avx::wall_mask(s, b0, b1)
+                    }
+                    #[cfg(not(target_arch = "x86_64"))]
+                    unreachable!()
+                } else {
+                    wall_mask(s, b0, b1)
+                }
+            } else {
+                0
+            };
             for i in b0..b1 {
-                walls_gravity::<F, T, W, G, STATS>(s, i, i0, fo, to, ps, &mut wc, wnew, &mut out);
+                let t = (touch >> (i - b0)) & 1 != 0;
+                walls_gravity::<F, T, W, G, STATS>(
+                    s, i, i0, t, fo, to, ps, &mut wc, wnew, &mut out,
+                );
             }
             b0 = b1;
         }
@@ -457,6 +476,7 @@ fn walls_gravity<F, T, W, G, const STATS: bool>(
     s: &Shared<F, T, impl Domain>,
     i: usize,
     i0: usize,
+    touch: bool,
     fo: &mut [V3],
     to: &mut [V3],
     ps: &mut [[f64; 10]],
@@ -470,16 +490,8 @@ fn walls_gravity<F, T, W, G, const STATS: bool>(
     G: Body,
 {
     let li = i - i0;
-    // most particles touch no wall: test the gaps before loading anything else
-    if W::ON
-        && s.planes.iter().any(|pl| {
-            let x = &s.xr[i];
-            // the test of the loop below, negated (a NaN gap counts as touching there too)
-            #[allow(clippy::neg_cmp_op_on_partial_ord)]
-            let touching = !(pl.sign * (x[pl.axis] - pl.pos) >= x[3]);
-            touching
-        })
-    {
+    // most particles touch no wall (`wall_mask`)
+    if W::ON && touch {
         let mut fsum = fo[li];
         let mut tsum = to[li];
         let [x0, x1, x2, ri] = s.xr[i];
@@ -539,6 +551,22 @@ fn walls_gravity<F, T, W, G, const STATS: bool>(
     if G::ON {
         fo[li] += s.mass[i] * s.g;
     }
+}
+
+/// Bit l set: particle b0 + l (l < BLOCK) may touch a wall: the test of `walls_gravity`'s
+/// loop, negated (a NaN gap counts as touching there too).
+#[inline(always)]
+fn wall_mask<F: Form, T: Friction, D>(s: &Shared<F, T, D>, b0: usize, b1: usize) -> u32 {
+    let mut m = 0u32;
+    for (l, x) in s.xr[b0..b1].iter().enumerate() {
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let t = s
+            .planes
+            .iter()
+            .any(|pl| !(pl.sign * (x[pl.axis] - pl.pos) >= x[3]));
+        m |= (t as u32) << l;
+    }
+    m
 }
 
 #[inline(always)]
@@ -726,6 +754,44 @@ mod avx {
         }
         *xs = x;
         nc
+    }
+
+    /// `super::wall_mask` four particles at a time (the same operations lane by lane).
+    ///
+    /// # Safety
+    /// AVX2 CPU.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn wall_mask<F: Form, T: Friction, D>(
+        s: &Shared<F, T, D>,
+        b0: usize,
+        b1: usize,
+    ) -> u32 {
+        let xr = &s.xr[b0..b1];
+        let n = xr.len();
+        let mut m = 0u32;
+        let mut l = 0;
+        while l < n {
+            // a short last group repeats its last particle (bits past n dropped below)
+            // SAFETY: indices clamped to n - 1 < xr.len()
+            let r =
+                [0, 1, 2, 3].map(|q| unsafe { ld(xr.get_unchecked((l + q).min(n - 1)).as_ptr()) });
+            let c = transpose(r[0], r[1], r[2], r[3]);
+            let mut t = _mm256_setzero_pd();
+            for pl in s.planes {
+                let gap = _mm256_mul_pd(
+                    _mm256_set1_pd(pl.sign),
+                    _mm256_sub_pd(c[pl.axis.min(2)], _mm256_set1_pd(pl.pos)),
+                );
+                t = _mm256_or_pd(t, _mm256_cmp_pd::<_CMP_NGE_UQ>(gap, c[3]));
+            }
+            m |= (_mm256_movemask_pd(t) as u32) << l;
+            l += 4;
+        }
+        if n < 32 {
+            m &= (1u32 << n) - 1;
+        }
+        m
     }
 
     /// PREFIX[m][l]: the set bits of m below bit l.
