@@ -4,17 +4,25 @@
 //!
 //! One step (velocity Verlet, as LAMMPS `nve/sphere`):
 //! 1. half-kick and drift (the domain integrates: a deforming cell moves particles too), in the
-//!    same pass as the displacement check and the packed records of the pair loop (plain NVE);
+//!    same pass as the packed records of the pair loop and (plain NVE) the largest drift
+//!    speed;
 //! 2. rebuild the pair list (wrapping positions into the cell, sorting particles along a Morton
-//!    curve) if a particle moved more than half the skin;
-//! 3. forces, parallel over fixed chunks of particles whose size depends on N only: a chunk
+//!    curve) once a particle may have moved half the skin: plain NVE bounds every displacement
+//!    by the sum over the steps of the largest speed times dt (no positions kept), a cell that
+//!    moves particles itself compares with the positions at the build;
+//! 3. prune (plain NVE): every few steps the listed pairs are filtered down to those within an
+//!    inner skin of contact, chosen to last about `prune_steps` steps at the current speed; the
+//!    force loop then tests only those (dynamic pruning, as in GROMACS). No pair that can touch
+//!    before the next prune is dropped, so the contacts and their order, and so the results,
+//!    are those of the whole list;
+//! 4. forces, parallel over fixed chunks of particles whose size depends on N only: a chunk
 //!    (`crate::forceloop`, in blocks of 32 particles: distance test, contact law on lanes of 4
 //!    contacts, walls and gravity) sums the pairs inside it in place and buffers the pairs
 //!    reaching into later chunks; a second pass adds the buffered pairs to their second
-//!    particles (and, for plain NVE, applies the final half-kick). Every floating-point sum
-//!    has an order fixed by the list, so any number of threads, and AVX2 or not, gives the
-//!    same bits;
-//! 4. second half-kick (and the cell's momentum update) where the domain has its own dynamics.
+//!    particles (and, for plain NVE, applies the final half-kick; inside one `run` this pass
+//!    rides on the next step's first pass). Every floating-point sum has an order fixed by
+//!    the list, so any number of threads, and AVX2 or not, gives the same bits;
+//! 5. second half-kick (and the cell's momentum update) where the domain has its own dynamics.
 //!
 //! Tangential histories are stored per closed contact (`crate::history`), not per listed pair.
 

@@ -1,4 +1,10 @@
-//! Cell lists and a Verlet pair list with a skin.
+//! Cell lists, a Verlet pair list with a skin, and the inner list the force loop tests.
+//!
+//! The inner list (`NeighborList::prune`) keeps, per force-loop chunk and in list order, the
+//! listed pairs within an inner skin of contact: about 3 of the 5 listed pairs per particle
+//! in dense flow, for a few per cent of the list's cost every ~16 steps. Pairs left out
+//! cannot touch before the next prune (the displacement bound), so the force loop finds
+//! exactly the contacts of the whole list, in the same order.
 //!
 //! The list is a half list in CSR form, built particle by particle after a spatial sort (particles
 //! are re-ordered by cell at every build, so neighbours are close in memory). Tangential
