@@ -436,25 +436,7 @@ fn deferred_cross_pass_changes_no_bits() {
 /// steps (0: not pruned): positions, velocities and spins by id, and (prunes, builds, mean
 /// inner / listed pairs).
 fn pruned_run(prune_steps: f64) -> (Vec<[f64; 9]>, u64, u64, f64) {
-    use crate::engine::{Gravity, Plane, PlaneWalls};
-    let l = 10.0;
-    let mut p = gas(0.35, l, 17, SizeDist::Uniform(0.9, 1.1));
-    for x in p.x.iter_mut() {
-        x.x = 0.6 + x.x * ((l - 1.2) / l);
-    }
-    let law = LawParams::new(1e5, 0.7, 0.5);
-    let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
-    let walls = PlaneWalls::<Hooke, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
-    let mut s = Engine::new(
-        p,
-        law,
-        bx,
-        walls,
-        Gravity(V3::new(-2.0, -1.0, 0.0)),
-        None,
-        0.2,
-    )
-    .unwrap();
+    let mut s = walled_gas::<Hooke>(10.0, 17, 0.7, V3::new(-2.0, -1.0, 0.0));
     s.prune_steps = prune_steps;
     let (q0, b0) = (s.nl.prunes, s.nl.builds);
     let mut frac = 0.0;
@@ -702,31 +684,28 @@ fn unstable_integration_stops_with_a_clear_error() {
     assert!(s.p.x.iter().all(|x| x.iter().all(|c| c.is_finite())) || msg.contains("NaN"));
 }
 
-/// A gas between walls at x = 0 and x = l with gravity towards the first, run `steps` steps,
-/// then one step with the virial and the per-particle statistics.
-fn walled_channel<F: Form>(
-    l: f64,
-    steps: u64,
-) -> Engine<F, Coulomb, OrthoBox, crate::engine::PlaneWalls<F, Coulomb>, crate::engine::Gravity> {
+type WalledGas<F> =
+    Engine<F, Coulomb, OrthoBox, crate::engine::PlaneWalls<F, Coulomb>, crate::engine::Gravity>;
+
+/// A frictional gas (seed `seed`, restitution `e`) between walls at x = 0 and x = l, periodic
+/// in y and z, with the body force `g`.
+fn walled_gas<F: Form>(l: f64, seed: u64, e: f64, g: V3) -> WalledGas<F> {
     use crate::engine::{Gravity, Plane, PlaneWalls};
-    let mut p = gas(0.35, l, 9, SizeDist::Uniform(0.9, 1.1));
-    // squeeze x into [0.6, 7.4] so some particles touch the walls at x = 0 and x = 8
+    let mut p = gas(0.35, l, seed, SizeDist::Uniform(0.9, 1.1));
+    // squeeze x into [0.6, l - 0.6] so some particles touch the walls
     for x in p.x.iter_mut() {
-        x.x = 0.6 + x.x * (6.8 / 8.0);
+        x.x = 0.6 + x.x * ((l - 1.2) / l);
     }
-    let law = LawParams::new(1e5, 0.8, 0.5);
+    let law = LawParams::new(1e5, e, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
     let walls = PlaneWalls::<F, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
-    let mut s = Engine::new(
-        p,
-        law,
-        bx,
-        walls,
-        Gravity(V3::new(-5.0, 0.0, 0.0)),
-        None,
-        0.2,
-    )
-    .unwrap();
+    Engine::new(p, law, bx, walls, Gravity(g), None, 0.2).unwrap()
+}
+
+/// A gas between walls at x = 0 and x = l with gravity towards the first, run `steps` steps,
+/// then one step with the virial and the per-particle statistics.
+fn walled_channel<F: Form>(l: f64, steps: u64) -> WalledGas<F> {
+    let mut s = walled_gas::<F>(l, 9, 0.8, V3::new(-5.0, 0.0, 0.0));
     s.run(steps).unwrap();
     s.want_virial = true;
     s.want_stats = true;
