@@ -396,7 +396,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     pub fn rebuild(&mut self) {
         self.wrap_all();
         let (pairs, walls) = self.carried_histories();
-        self.nl.build(&mut self.p, &self.domain, D::PLAIN_NVE);
+        self.nl.build(&mut self.p, &self.domain);
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
         self.trim();

@@ -74,13 +74,11 @@ pub struct NeighborList {
     pub cross_src: Vec<u16>,
     /// Scratch of `build_cross` (kept to avoid an allocation per prune).
     cross_fill: Vec<u32>,
-    /// Plain NVE: the displacement since the build is bounded by the largest drift speed
-    /// of every step (`moved`), and no positions are kept. Otherwise (a cell that moves
-    /// particles itself) the positions at the build decide (`x_build`).
-    pub by_speed: bool,
-    /// Bound on how far any particle has moved since the build (`by_speed`).
+    /// Plain NVE (`Domain::PLAIN_NVE`): bound on how far any particle has moved since the
+    /// build (the largest drift speed times dt, summed over the steps); no positions are
+    /// kept. A domain that moves particles itself keeps them instead (`x_build`).
     pub moved: f64,
-    /// Positions at the last build (for the half-skin criterion when not `by_speed`).
+    /// Positions at the last build (the half-skin criterion when not plain NVE).
     /// (single precision: it only decides when to rebuild, with `xb_eps` as the margin).
     pub x_build: Vec<[f32; 3]>,
     /// Bound on the rounding of `x_build`.
@@ -107,7 +105,6 @@ impl NeighborList {
             cross_slot: vec![],
             cross_src: vec![],
             cross_fill: vec![],
-            by_speed: false,
             moved: 0.0,
             x_build: vec![],
             xb_eps: 0.0,
@@ -167,7 +164,7 @@ impl NeighborList {
         if !self.valid || self.own_start.len() != p.len() + 1 {
             return true;
         }
-        if self.by_speed {
+        if D::PLAIN_NVE {
             return self.moved_out();
         }
         if self.x_build.len() != p.len() {
@@ -180,7 +177,7 @@ impl NeighborList {
             .any(|(x, x0)| dom.delta(x, &widen(x0)).norm_squared() > lim)
     }
 
-    /// `by_speed`: the bound on the displacements since the build reached half the skin.
+    /// Plain NVE: the bound on the displacements since the build reached half the skin.
     #[inline]
     pub fn moved_out(&self) -> bool {
         2.0 * self.moved >= self.skin
@@ -205,8 +202,7 @@ impl NeighborList {
 
     /// Rebuild: spatially sort particles (along a Morton curve of cells) and rebuild the pair
     /// list. The engine carries the contact histories over by particle id.
-    /// `by_speed`: see the field.
-    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D, by_speed: bool) {
+    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) {
         let n = p.len();
         // 2. cells in fractional coordinates
         let rmax = p.max_radius();
@@ -370,10 +366,9 @@ impl NeighborList {
         self.inner_valid = false;
 
         let xmax = p.x.iter().map(|x| x.amax()).fold(0.0f64, f64::max);
-        self.by_speed = by_speed;
         self.moved = 0.0;
         self.x_build.clear();
-        if by_speed {
+        if D::PLAIN_NVE {
             self.x_build.shrink_to_fit();
             self.xb_eps = 0.0;
         } else {

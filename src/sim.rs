@@ -333,10 +333,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             "nl.pair_img",
             &nl.pair_img.iter().map(|&c| c as u32).collect::<Vec<_>>(),
         );
-        w.f64s(
-            "nl.moved",
-            &[nl.moved, nl.inner_eps, nl.by_speed as u8 as f64],
-        );
+        w.f64s("nl.moved", &[nl.moved, nl.inner_eps]);
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
         // contact histories by particle ids (placed back into the list on loading)
         let (hp, hw) = self.carried_histories();
@@ -484,9 +481,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
             self.nl.pair_img = img.iter().map(|&c| c as u8).collect();
             let m = r.f64s("nl.moved")?;
+            if m.len() != 2 {
+                return Err(bad("list displacement bound has the wrong length".into()));
+            }
             self.nl.moved = m[0];
             self.nl.inner_eps = m[1];
-            self.nl.by_speed = m[2] != 0.0;
         } else {
             // an older checkpoint: the images follow from the positions at the last build;
             // the displacement since then is not known, so the list is rebuilt
