@@ -59,8 +59,8 @@ pub struct NeighborList {
     /// Bound on how far any particle has moved since the last prune (sum over the steps of
     /// the largest drift, plus the rounding of the positions).
     pub inner_moved: f64,
-    /// Rounding allowance added to `inner_moved` per step.
-    pub inner_eps: f64,
+    /// Rounding allowance added to both displacement bounds (`moved`, `inner_moved`) per step.
+    pub drift_eps: f64,
     pub inner_valid: bool,
     pub prunes: u64,
     /// Cross pairs of the inner list (second particle in a later chunk) are numbered in list
@@ -97,7 +97,7 @@ impl NeighborList {
             inner: vec![],
             inner_skin: f64::INFINITY,
             inner_moved: 0.0,
-            inner_eps: 0.0,
+            drift_eps: 0.0,
             inner_valid: false,
             prunes: 0,
             cross_off: vec![],
@@ -187,7 +187,7 @@ impl NeighborList {
     /// bounds of the list and of the inner list.
     #[inline]
     pub fn add_drift(&mut self, vmax: f64, dt: f64) {
-        let d = vmax * dt + self.inner_eps;
+        let d = vmax * dt + self.drift_eps;
         self.moved += d;
         self.inner_moved += d;
     }
@@ -379,7 +379,7 @@ impl NeighborList {
         }
         // a drift x + v dt rounds by at most half an ulp per coordinate; positions stay
         // within half a skin of where they were wrapped until the next build
-        self.inner_eps = 4.0 * f64::EPSILON * (1.0 + xmax + self.skin);
+        self.drift_eps = 4.0 * f64::EPSILON * (1.0 + xmax + self.skin);
         self.builds += 1;
         self.valid = true;
     }
@@ -495,15 +495,16 @@ fn prune_chunk(
     let (kb, ke) = (own_start[i0] as usize, own_start[i1] as usize);
     let m = ke - kb;
     PRUNE_SCRATCH.with(|cell| {
-        let sc = &mut *cell.borrow_mut();
+        let (sk, so) = &mut *cell.borrow_mut();
         // room for every pair; the kept ones are copied out at the end, so the chunk's
         // lists hold no more than they keep
-        if sc.len() < m {
-            sc.resize(m, 0);
+        if sk.len() < m {
+            sk.resize(m, 0);
+            so.resize(m, 0);
         }
         ic.block.clear();
         let (pj, pi) = (&pair_j[kb..ke], &pair_img[kb..ke]);
-        let keys = &mut sc[..m];
+        let (keys, owns) = (&mut sk[..m], &mut so[..m]);
         let mut len = 0usize;
         let mut ncross = 0u32;
         for i in i0..i1 {
@@ -514,7 +515,7 @@ fn prune_chunk(
             let (k0, k1) = (own_start[i] as usize - kb, own_start[i + 1] as usize - kb);
             assert!(k0 <= k1 && k1 <= m);
             for k in k0..k1 {
-                // SAFETY: k < m, the length of pj, pi and keys; list partners are < n (the
+                // SAFETY: k < m, the length of pj, pi, keys and owns; list partners are < n (the
                 // list is built from 0..n, checked in debug builds); image codes < 27
                 let (j, img) = unsafe { (*pj.get_unchecked(k), *pi.get_unchecked(k)) };
                 debug_assert!((j as usize) < xr.len() && img < 27);
@@ -527,34 +528,31 @@ fn prune_chunk(
                 #[allow(clippy::neg_cmp_op_on_partial_ord)]
                 let keep = !(r2 >= cut * cut);
                 // written at the next free place (len <= k < m), kept by advancing it
-                unsafe { *keys.get_unchecked_mut(len) = k as u32 };
+                unsafe {
+                    *keys.get_unchecked_mut(len) = k as u32;
+                    *owns.get_unchecked_mut(len) = (i - i0) as u16;
+                }
                 len += keep as usize;
                 ncross += (keep && j as usize >= i1) as u32;
             }
         }
         ic.block.push(len as u32);
-        let keys = &keys[..len];
         ic.base = kb as u32;
         ic.span = m as u32;
         ic.key.clear();
         ic.key.reserve_exact(len);
+        ic.key.extend_from_slice(&keys[..len]);
         ic.own.clear();
         ic.own.reserve_exact(len);
-        // the owner of each kept pair, from the list's offsets
-        let mut l = 0usize;
-        ic.own.extend(keys.iter().map(|&k| {
-            while (own_start[i0 + l + 1] as usize - kb) <= k as usize {
-                l += 1;
-            }
-            l as u16
-        }));
-        ic.key.extend_from_slice(keys);
+        ic.own.extend_from_slice(&owns[..len]);
         ic.ncross = ncross;
     });
 }
 
 thread_local! {
-    static PRUNE_SCRATCH: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// Keys and owners of a chunk's pairs while pruning.
+    static PRUNE_SCRATCH: std::cell::RefCell<(Vec<u32>, Vec<u16>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// One force-loop chunk's part of the inner list (see `NeighborList::prune`).

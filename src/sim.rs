@@ -333,7 +333,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             "nl.pair_img",
             &nl.pair_img.iter().map(|&c| c as u32).collect::<Vec<_>>(),
         );
-        w.f64s("nl.moved", &[nl.moved, nl.inner_eps]);
+        w.f64s("nl.moved", &[nl.moved, nl.drift_eps]);
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
         // contact histories by particle ids (placed back into the list on loading)
         let (hp, hw) = self.carried_histories();
@@ -485,7 +485,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 return Err(bad("list displacement bound has the wrong length".into()));
             }
             self.nl.moved = m[0];
-            self.nl.inner_eps = m[1];
+            self.nl.drift_eps = m[1];
         } else {
             // an older checkpoint: the images follow from the positions at the last build;
             // the displacement since then is not known, so the list is rebuilt
