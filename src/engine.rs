@@ -1050,6 +1050,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             wlaw,
             g,
             inner: &nl.inner,
+            own_start: &nl.own_start,
             pair_j: &nl.pair_j,
             pair_img: &nl.pair_img,
             shifts,

@@ -36,6 +36,8 @@ pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
     /// The pairs to test, per chunk (`NeighborList::prune`), and the full list's second
     /// particles and image codes they point to.
     pub inner: &'a [InnerChunk],
+    /// The full list's offsets per particle (owners of an unpruned chunk's pairs).
+    pub own_start: &'a [u32],
     pub pair_j: &'a [u32],
     pub pair_img: &'a [u8],
     /// Periodic image shifts by image code, padded to 4 doubles.
@@ -71,6 +73,8 @@ pub(crate) struct ChunkIo<'a, H> {
 struct Scratch {
     ids: Vec<[u32; 4]>,
     rec: Vec<[f64; 4]>,
+    /// Owners and keys of the current block of an unpruned chunk.
+    dense: DenseBlock,
     /// New tangential displacements (pass 2).
     ux: Vec<f64>,
     uy: Vec<f64>,
@@ -88,6 +92,28 @@ impl Scratch {
                 v.resize(want, 0.0);
             }
         }
+    }
+}
+
+/// Owners and keys of a block of an unpruned chunk (`InnerChunk::dense`), which stores
+/// neither: every pair of the full list, in order.
+#[derive(Default)]
+struct DenseBlock {
+    own: Vec<u16>,
+    key: Vec<u32>,
+}
+
+impl DenseBlock {
+    /// The pairs of particles b0..b1 of the chunk starting at particle i0 and pair `base`.
+    #[inline(never)]
+    fn fill(&mut self, own_start: &[u32], base: u32, b0: usize, b1: usize, i0: usize) {
+        self.own.clear();
+        for i in b0..b1 {
+            let c = (own_start[i + 1] - own_start[i]) as usize;
+            self.own.extend(std::iter::repeat_n((i - i0) as u16, c));
+        }
+        self.key.clear();
+        self.key.extend(own_start[b0] - base..own_start[b1] - base);
     }
 }
 
@@ -177,90 +203,99 @@ where
     }
     // a cross slot stays open (u32::MAX) unless pass 2 finds the pair in contact
     cidx.fill(u32::MAX);
-    SCRATCH.with(|cell| {
-        let sc = &mut *cell.borrow_mut();
-        let mut b0 = i0;
-        while b0 < i1 {
-            let b1 = (b0 + BLOCK).min(i1);
-            // the block's pairs in the inner list
-            let bi = (b0 - i0) / BLOCK;
-            let (kb, ke) = (ic.block[bi] as usize, ic.block[bi + 1] as usize);
-            sc.fit(ke - kb);
-            let nc = if AVX {
+    // the thread's scratch, taken out for the chunk (the loop then lives in this function,
+    // compiled with its instruction set, not in a closure the compiler may keep apart)
+    let mut scratch = SCRATCH.with(|cell| cell.take());
+    let sc = &mut scratch;
+    // (out of the scratch while the blocks borrow it)
+    let mut dense = std::mem::take(&mut sc.dense);
+    let mut b0 = i0;
+    while b0 < i1 {
+        let b1 = (b0 + BLOCK).min(i1);
+        // the block's pairs in the inner list: their owners and keys
+        let bi = (b0 - i0) / BLOCK;
+        let (kb, ke) = (ic.block[bi] as usize, ic.block[bi + 1] as usize);
+        sc.fit(ke - kb);
+        let (own, key): (&[u16], &[u32]) = if ic.dense {
+            dense.fill(s.own_start, ic.base, b0, b1, i0);
+            (&dense.own, &dense.key)
+        } else {
+            (&ic.own[kb..ke], &ic.key[kb..ke])
+        };
+        let nc = if AVX {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs.
+            unsafe {
+                avx::filter(s, ic, own, key, sc, i0, i1, &mut xs)
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            unreachable!()
+        } else {
+            filter(s, ic, own, key, sc, i0, i1, &mut xs)
+        };
+        out.contacts += nc;
+        let mut sums = Sums {
+            i0,
+            fo: &mut *fo,
+            to: &mut *to,
+            cross: &mut *cross,
+            cstat: &mut *cstat,
+            cidx: &mut *cidx,
+            ps: &mut *ps,
+            out: &mut out,
+        };
+        law_and_sums::<F, T, D, STATS, VIR, AVX>(s, sc, nc, &mut hc, hnew, &mut sums);
+        // which of the block's particles touch a wall (most touch none)
+        let touch = if W::ON {
+            if AVX {
                 #[cfg(target_arch = "x86_64")]
-                // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs.
+                // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs
                 unsafe {
-                    avx::filter(s, ic, sc, kb, ke, i0, i1, &mut xs)
+                    avx::wall_mask(s, b0, b1)
                 }
                 #[cfg(not(target_arch = "x86_64"))]
                 unreachable!()
             } else {
-                filter(s, ic, sc, kb, ke, i0, i1, &mut xs)
-            };
-            out.contacts += nc;
-            let mut sums = Sums {
-                i0,
-                fo: &mut *fo,
-                to: &mut *to,
-                cross: &mut *cross,
-                cstat: &mut *cstat,
-                cidx: &mut *cidx,
-                ps: &mut *ps,
-                out: &mut out,
-            };
-            law_and_sums::<F, T, D, STATS, VIR, AVX>(s, sc, nc, &mut hc, hnew, &mut sums);
-            // which of the block's particles touch a wall (most touch none)
-            let touch = if W::ON {
-                if AVX {
-                    #[cfg(target_arch = "x86_64")]
-                    // SAFETY: AVX is only true in `chunk_avx2`, which runs only on AVX2 CPUs
-                    unsafe {
-                        avx::wall_mask(s, b0, b1)
-                    }
-                    #[cfg(not(target_arch = "x86_64"))]
-                    unreachable!()
-                } else {
-                    wall_mask(s, b0, b1)
-                }
-            } else {
-                0
-            };
-            for i in b0..b1 {
-                let t = (touch >> (i - b0)) & 1 != 0;
-                walls_gravity::<F, T, W, G, STATS>(
-                    s, i, i0, t, fo, to, ps, &mut wc, wnew, &mut out,
-                );
+                wall_mask(s, b0, b1)
             }
-            b0 = b1;
+        } else {
+            0
+        };
+        for i in b0..b1 {
+            let t = (touch >> (i - b0)) & 1 != 0;
+            walls_gravity::<F, T, W, G, STATS>(s, i, i0, t, fo, to, ps, &mut wc, wnew, &mut out);
         }
-    });
+        b0 = b1;
+    }
+    sc.dense = dense;
+    SCRATCH.with(|cell| cell.replace(scratch));
     debug_assert_eq!(xs, cidx.len());
     out
 }
 
-/// Pass 1 (baseline): the distance test over the inner list's pairs kb..ke (a block of the
-/// chunk of particles i0..i1), contacts appended in list order. Returns their number. Cross
-/// slots are numbered in list order, open ones included.
+/// Pass 1 (baseline): the distance test over a block's pairs of the inner list (owner and
+/// key of each; the chunk is particles i0..i1), contacts appended in list order. Returns
+/// their number. Cross slots are numbered in list order, open ones included.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn filter<F: Form, T: Friction, D>(
     s: &Shared<F, T, D>,
     ic: &InnerChunk,
+    own: &[u16],
+    pk: &[u32],
     sc: &mut Scratch,
-    kb: usize,
-    ke: usize,
     i0: usize,
     i1: usize,
     xs: &mut usize,
 ) -> usize {
     let xr = s.xr;
     let mut nc = 0usize;
-    let (own, pk) = (&ic.own[kb..ke], &ic.key[kb..ke]);
+    assert_eq!(own.len(), pk.len());
     let (pj, pi) = (
         &s.pair_j[ic.base as usize..],
         &s.pair_img[ic.base as usize..],
     );
-    for k in 0..ke - kb {
+    for k in 0..pk.len() {
         let i = i0 + own[k] as usize;
         let j = pj[pk[k] as usize] as usize;
         let is_cross = j >= i1;
@@ -625,16 +660,15 @@ mod avx {
     pub(super) unsafe fn filter<F: Form, T: Friction, D>(
         s: &Shared<F, T, D>,
         ic: &InnerChunk,
+        own: &[u16],
+        pair_key: &[u32],
         sc: &mut Scratch,
-        kb: usize,
-        ke: usize,
         i0: usize,
         i1: usize,
         xs: &mut usize,
     ) -> usize {
         let xr = s.xr;
-        let pair_key = &ic.key[..];
-        let own = &ic.own[..];
+        let (kb, ke) = (0, pair_key.len());
         // the full list's partners and image codes of the chunk, indexed by key
         let (pair_j, pair_img) = (
             &s.pair_j[ic.base as usize..],
@@ -642,8 +676,8 @@ mod avx {
         );
         // keys are < span by construction (`prune_chunk`)
         assert!(ic.span as usize <= pair_j.len().min(pair_img.len()));
-        assert!(ke <= pair_key.len() && ke <= own.len());
-        debug_assert!(pair_key[kb..ke].iter().all(|&q| q < ic.span));
+        assert!(ke <= own.len());
+        debug_assert!(pair_key.iter().all(|&q| q < ic.span));
         let i0 = i0 as u32;
         let mut nc = 0usize;
         // cross slots stay open (u32::MAX) unless pass 2 finds them closed

@@ -141,7 +141,7 @@ impl NeighborList {
 
     /// Pairs in the inner list.
     pub fn inner_len(&self) -> usize {
-        self.inner.iter().map(|c| c.key.len()).sum()
+        self.inner.iter().map(|c| c.len()).sum()
     }
 
     /// Number of cross pairs of the inner list (buffered between chunks).
@@ -494,6 +494,24 @@ fn prune_chunk(
 ) {
     let (kb, ke) = (own_start[i0] as usize, own_start[i1] as usize);
     let m = ke - kb;
+    ic.base = kb as u32;
+    ic.span = m as u32;
+    ic.block.clear();
+    if inner_skin == f64::INFINITY {
+        // every pair kept: nothing stored per pair (the force loop reads the full list)
+        ic.dense = true;
+        ic.key = Vec::new();
+        ic.own = Vec::new();
+        ic.block.extend(
+            (i0..i1)
+                .step_by(BLOCK)
+                .chain(std::iter::once(i1))
+                .map(|i| own_start[i] - kb as u32),
+        );
+        ic.ncross = pair_j[kb..ke].iter().filter(|&&j| j as usize >= i1).count() as u32;
+        return;
+    }
+    ic.dense = false;
     PRUNE_SCRATCH.with(|cell| {
         let (sk, so) = &mut *cell.borrow_mut();
         // room for every pair; the kept ones are copied out at the end, so the chunk's
@@ -502,7 +520,6 @@ fn prune_chunk(
             sk.resize(m, 0);
             so.resize(m, 0);
         }
-        ic.block.clear();
         let (pj, pi) = (&pair_j[kb..ke], &pair_img[kb..ke]);
         let (keys, owns) = (&mut sk[..m], &mut so[..m]);
         let mut len = 0usize;
@@ -537,8 +554,6 @@ fn prune_chunk(
             }
         }
         ic.block.push(len as u32);
-        ic.base = kb as u32;
-        ic.span = m as u32;
         ic.key.clear();
         ic.key.reserve_exact(len);
         ic.key.extend_from_slice(&keys[..len]);
@@ -572,13 +587,32 @@ pub struct InnerChunk {
     pub own: Vec<u16>,
     /// Pairs whose second particle lies in a later chunk.
     pub ncross: u32,
+    /// Every pair of the chunk kept (no pruning: an infinite inner skin): `key` and `own`
+    /// stay empty, the keys are 0..span and the owners follow from the list's offsets.
+    pub dense: bool,
 }
 
 impl InnerChunk {
+    /// Number of pairs kept.
+    pub fn len(&self) -> usize {
+        if self.dense {
+            self.span as usize
+        } else {
+            self.key.len()
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
     /// Second particle of each pair.
     pub fn partners<'a>(&'a self, pair_j: &'a [u32]) -> impl Iterator<Item = u32> + 'a {
         let pj = &pair_j[self.base as usize..];
-        self.key.iter().map(move |&k| pj[k as usize])
+        (0..self.len()).map(move |q| {
+            let k = if self.dense { q } else { self.key[q] as usize };
+            pj[k]
+        })
     }
 
     pub fn bytes(&self) -> usize {
