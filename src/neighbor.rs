@@ -431,8 +431,7 @@ impl NeighborList {
 
     /// Number the inner list's cross pairs and index them by second particle.
     fn build_cross(&mut self, n: usize) {
-        let ch = chunk_size(n);
-        let nchunks = n.div_ceil(ch);
+        let nchunks = n.div_ceil(chunk_size(n));
         self.cross_off.clear();
         self.cross_off.reserve(nchunks + 1);
         let mut total = 0u32;
@@ -443,9 +442,8 @@ impl NeighborList {
         self.cross_off.push(total);
         self.cross_start.clear();
         self.cross_start.resize(n + 1, 0);
-        for (c, ic) in self.inner.iter().enumerate() {
-            let end = ((c + 1) * ch).min(n) as u32;
-            for j in ic.partners(&self.pair_j).filter(|&j| j >= end) {
+        for ic in &self.inner {
+            for &j in &ic.xj {
                 self.cross_start[j as usize + 1] += 1;
             }
         }
@@ -465,9 +463,8 @@ impl NeighborList {
         fill.clear();
         fill.extend_from_slice(&self.cross_start[..n]);
         for (c, ic) in self.inner.iter().enumerate() {
-            let end = ((c + 1) * ch).min(n) as u32;
             let slots = self.cross_off[c]..;
-            for (s, j) in slots.zip(ic.partners(&self.pair_j).filter(|&j| j >= end)) {
+            for (s, &j) in slots.zip(&ic.xj) {
                 let f = &mut fill[j as usize];
                 self.cross_slot[*f as usize] = s;
                 self.cross_src[*f as usize] = c as u16;
@@ -508,22 +505,26 @@ fn prune_chunk(
                 .chain(std::iter::once(i1))
                 .map(|i| own_start[i] - kb as u32),
         );
-        ic.ncross = pair_j[kb..ke].iter().filter(|&&j| j as usize >= i1).count() as u32;
+        ic.xj.clear();
+        ic.xj
+            .extend(pair_j[kb..ke].iter().filter(|&&j| j as usize >= i1));
+        ic.ncross = ic.xj.len() as u32;
         return;
     }
     ic.dense = false;
     PRUNE_SCRATCH.with(|cell| {
-        let (sk, so) = &mut *cell.borrow_mut();
+        let (sk, so, sx) = &mut *cell.borrow_mut();
         // room for every pair; the kept ones are copied out at the end, so the chunk's
         // lists hold no more than they keep
         if sk.len() < m {
             sk.resize(m, 0);
             so.resize(m, 0);
+            sx.resize(m, 0);
         }
         let (pj, pi) = (&pair_j[kb..ke], &pair_img[kb..ke]);
-        let (keys, owns) = (&mut sk[..m], &mut so[..m]);
+        let (keys, owns, xjs) = (&mut sk[..m], &mut so[..m], &mut sx[..m]);
         let mut len = 0usize;
-        let mut ncross = 0u32;
+        let mut ncross = 0usize;
         for i in i0..i1 {
             if (i - i0).is_multiple_of(BLOCK) {
                 ic.block.push(len as u32);
@@ -545,12 +546,14 @@ fn prune_chunk(
                 #[allow(clippy::neg_cmp_op_on_partial_ord)]
                 let keep = !(r2 >= cut * cut);
                 // written at the next free place (len <= k < m), kept by advancing it
+                // (and a cross partner at the next free place of its own list, ncross <= len)
                 unsafe {
                     *keys.get_unchecked_mut(len) = k as u32;
                     *owns.get_unchecked_mut(len) = (i - i0) as u16;
+                    *xjs.get_unchecked_mut(ncross) = j;
                 }
                 len += keep as usize;
-                ncross += (keep && j as usize >= i1) as u32;
+                ncross += (keep && j as usize >= i1) as usize;
             }
         }
         ic.block.push(len as u32);
@@ -560,14 +563,17 @@ fn prune_chunk(
         ic.own.clear();
         ic.own.reserve_exact(len);
         ic.own.extend_from_slice(&owns[..len]);
-        ic.ncross = ncross;
+        ic.xj.clear();
+        ic.xj.extend_from_slice(&xjs[..ncross]);
+        ic.ncross = ncross as u32;
     });
 }
 
 thread_local! {
-    /// Keys and owners of a chunk's pairs while pruning.
-    static PRUNE_SCRATCH: std::cell::RefCell<(Vec<u32>, Vec<u16>)> =
-        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+    /// Keys, owners and cross partners of a chunk's pairs while pruning.
+    #[allow(clippy::type_complexity)]
+    static PRUNE_SCRATCH: std::cell::RefCell<(Vec<u32>, Vec<u16>, Vec<u32>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
 }
 
 /// One force-loop chunk's part of the inner list (see `NeighborList::prune`).
@@ -587,6 +593,9 @@ pub struct InnerChunk {
     pub own: Vec<u16>,
     /// Pairs whose second particle lies in a later chunk.
     pub ncross: u32,
+    /// Their second particles, in list order (numbering the cross pairs at a prune reads
+    /// these instead of walking every kept pair again).
+    pub xj: Vec<u32>,
     /// Every pair of the chunk kept (no pruning: an infinite inner skin): `key` and `own`
     /// stay empty, the keys are 0..span and the owners follow from the list's offsets.
     pub dense: bool,
@@ -616,7 +625,10 @@ impl InnerChunk {
     }
 
     pub fn bytes(&self) -> usize {
-        self.block.capacity() * 4 + self.key.capacity() * 4 + self.own.capacity() * 2
+        self.block.capacity() * 4
+            + self.key.capacity() * 4
+            + self.own.capacity() * 2
+            + self.xj.capacity() * 4
     }
 }
 
