@@ -600,9 +600,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         // one pass over the particles: (for plain NVE) the half-kick and drift, then the
         // displacement since the last build and the packed records for the pair loop
         let moved = if D::PLAIN_NVE {
-            let vmax2 = self.kick_drift_pack();
-            self.vmax2 = vmax2;
-            self.nl.add_drift(vmax2.sqrt(), dt);
+            let dr = self.kick_drift_pack();
+            self.vmax2 = dr.m2;
+            self.nl.add_drift(dr.m2.sqrt(), dt);
+            self.nl.frame_v = dr.next_frame();
             self.nl.moved_out()
         } else {
             self.domain.integrate_initial(&mut self.p, dt);
@@ -707,14 +708,18 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the step is bound by memory traffic, and this reads each particle once.
     /// Returns the largest squared drift velocity (the lists' displacement bounds grow by
     /// it times dt).
-    fn kick_drift_pack(&mut self) -> f64 {
+    fn kick_drift_pack(&mut self) -> Drift {
         let ch = chunk_size(self.p.len());
         let n = self.p.len();
         if !self.nl.valid || self.nl.own_start.len() != n + 1 {
             self.complete_step();
             crate::domain::nve_initial(&mut self.p, self.dt);
-            return f64::INFINITY;
+            return Drift {
+                m2: f64::INFINITY,
+                ..Drift::EMPTY
+            };
         }
+        let u = self.nl.frame_v;
         // the last step's deferred cross pass and final half-kick, particle by particle
         // ahead of this step's half-kick
         let pending = std::mem::take(&mut self.cross_pending);
@@ -758,9 +763,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     pend,
                     h,
                     dt,
+                    u,
                 })
             })
-            .reduce(|| 0.0, f64::max)
+            .reduce(|| Drift::EMPTY, Drift::merge)
     }
 
     /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
@@ -1332,12 +1338,51 @@ struct KickChunk<'a, 'b> {
     pend: Option<&'b CrossSrc<'b>>,
     h: f64,
     dt: f64,
+    /// The frame velocity the drift speeds are measured against (`NeighborList::moved`).
+    u: [f64; 3],
+}
+
+/// What the half-kick pass reports for the displacement bounds: the largest squared drift
+/// speed relative to the frame velocity, and the range of the drift velocities (from which
+/// the next step's frame velocity is taken). Maxima and minima: the same for any chunking.
+#[derive(Clone, Copy, Debug)]
+struct Drift {
+    m2: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Drift {
+    const EMPTY: Drift = Drift {
+        m2: 0.0,
+        lo: [f64::INFINITY; 3],
+        hi: [f64::NEG_INFINITY; 3],
+    };
+
+    fn merge(a: Drift, b: Drift) -> Drift {
+        Drift {
+            m2: a.m2.max(b.m2),
+            lo: [0, 1, 2].map(|c| a.lo[c].min(b.lo[c])),
+            hi: [0, 1, 2].map(|c| a.hi[c].max(b.hi[c])),
+        }
+    }
+
+    /// The middle of the velocity range, per component (zero if it is not finite: a NaN
+    /// velocity, which the finite check reports, or no particles).
+    fn next_frame(&self) -> [f64; 3] {
+        let m = [0, 1, 2].map(|c| 0.5 * self.lo[c] + 0.5 * self.hi[c]);
+        if m.iter().all(|c| c.is_finite()) {
+            m
+        } else {
+            [0.0; 3]
+        }
+    }
 }
 
 /// Half-kick, drift and step records of one chunk (plain NVE), with AVX2 where the CPU has
 /// it (elementwise arithmetic: the same bits either way). Returns the largest squared drift
-/// velocity (the displacement bounds of the pair lists grow by it).
-fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> f64 {
+/// velocity relative to the frame, and the velocities' range (`Drift`).
+fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> Drift {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
@@ -1348,7 +1393,7 @@ fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> f64 {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn kdp_avx2<T: Friction>(k: KickChunk) -> f64 {
+fn kdp_avx2<T: Friction>(k: KickChunk) -> Drift {
     // SAFETY: this function only runs on AVX2 CPUs
     unsafe { wide::kdp::<T>(k) }
 }
@@ -1357,7 +1402,7 @@ fn kdp_avx2<T: Friction>(k: KickChunk) -> f64 {
 /// fourth lane zero): the same IEEE operations in the same order, so the same bits.
 #[cfg(target_arch = "x86_64")]
 mod wide {
-    use super::{CrossSrc, KickChunk, PairOut};
+    use super::{CrossSrc, Drift, KickChunk, PairOut};
     use crate::contact::Friction;
     use crate::V3;
     use std::arch::x86_64::*;
@@ -1421,7 +1466,7 @@ mod wide {
     /// # Safety
     /// AVX2 CPU.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn kdp<T: Friction>(k: KickChunk) -> f64 {
+    pub(super) unsafe fn kdp<T: Friction>(k: KickChunk) -> Drift {
         let KickChunk {
             x,
             v,
@@ -1434,6 +1479,7 @@ mod wide {
             pend,
             h,
             dt,
+            u,
         } = k;
         let n = x.len();
         assert!(v.len() == n && w.len() == n && f.len() == n && t.len() == n);
@@ -1446,7 +1492,12 @@ mod wide {
         let ptr = |q: &mut [V3]| q.as_mut_ptr() as *mut f64;
         let (px, pv, pw, pf, pt) = (ptr(x), ptr(v), ptr(w), ptr(f), ptr(t));
         let vdt = _mm256_set1_pd(dt);
+        let uf = _mm256_setr_pd(u[0], u[1], u[2], 0.0);
         let mut vm = 0.0f64;
+        let (mut vlo, mut vhi) = (
+            _mm256_set1_pd(f64::INFINITY),
+            _mm256_set1_pd(f64::NEG_INFINITY),
+        );
         for l in 0..n {
             // SAFETY: l < n, the length of every slice (asserted above); a 3-vector is 3
             // doubles at 3 l
@@ -1478,8 +1529,11 @@ mod wide {
                 st3(pv.add(o), vn);
                 let xn = _mm256_add_pd(ld3(px.add(o)), _mm256_mul_pd(vn, vdt));
                 st3(px.add(o), xn);
-                let [vx, vy, vz, _] = lanes(vn);
+                let [vx, vy, vz, _] = lanes(_mm256_sub_pd(vn, uf));
                 vm = vm.max(vx * vx + vy * vy + vz * vz);
+                // (as f64::min/max for numbers; NaN is reported by the finite check)
+                vlo = _mm256_min_pd(vlo, vn);
+                vhi = _mm256_max_pd(vhi, vn);
                 if T::FRICTIONAL {
                     wl = _mm256_add_pd(wl, _mm256_mul_pd(tl, hi));
                     st3(pw.add(o), wl);
@@ -1499,12 +1553,17 @@ mod wide {
                 _mm256_storeu_pd(kb.add(4), _mm256_blend_pd::<0b1000>(wp, _mm256_set1_pd(rl)));
             }
         }
-        vm
+        let ([l0, l1, l2, _], [h0, h1, h2, _]) = (lanes(vlo), lanes(vhi));
+        Drift {
+            m2: vm,
+            lo: [l0, l1, l2],
+            hi: [h0, h1, h2],
+        }
     }
 }
 
 #[inline(always)]
-fn kdp<T: Friction>(k: KickChunk) -> f64 {
+fn kdp<T: Friction>(k: KickChunk) -> Drift {
     let KickChunk {
         x,
         v,
@@ -1517,7 +1576,10 @@ fn kdp<T: Friction>(k: KickChunk) -> f64 {
         pend,
         h,
         dt,
+        u,
     } = k;
+    let uf = V3::new(u[0], u[1], u[2]);
+    let mut dr = Drift::EMPTY;
     let n = x.len();
     // equal lengths let the compiler drop the bounds checks
     let (v, w, a, b) = (&mut v[..n], &mut w[..n], &mut a[..n], &mut b[..n]);
@@ -1547,7 +1609,12 @@ fn kdp<T: Friction>(k: KickChunk) -> f64 {
         v[l] = vn;
         let xn = x[l] + vn * dt;
         x[l] = xn;
-        vm = vm.max(vn.norm_squared());
+        let d = vn - uf;
+        vm = vm.max(d.x * d.x + d.y * d.y + d.z * d.z);
+        for c in 0..3 {
+            dr.lo[c] = dr.lo[c].min(vn[c]);
+            dr.hi[c] = dr.hi[c].max(vn[c]);
+        }
         // without friction there are no torques: spins never change
         if T::FRICTIONAL {
             wl += tl * hi;
@@ -1561,7 +1628,8 @@ fn kdp<T: Friction>(k: KickChunk) -> f64 {
             [vp.x, vp.y, vp.z, im[l], wl.x, wl.y, wl.z, rad[l]]
         };
     }
-    vm
+    dr.m2 = vm;
+    dr
 }
 
 /// Packed position record of the pair loop: (x, R).

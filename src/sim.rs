@@ -333,7 +333,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             "nl.pair_img",
             &nl.pair_img.iter().map(|&c| c as u32).collect::<Vec<_>>(),
         );
-        w.f64s("nl.moved", &[nl.moved, nl.drift_eps]);
+        let u = nl.frame_v;
+        w.f64s("nl.moved", &[nl.moved, nl.drift_eps, u[0], u[1], u[2]]);
         w.u64s("nl.meta", &[nl.builds, nl.valid as u64]);
         // contact histories by particle ids (placed back into the list on loading)
         let (hp, hw) = self.carried_histories();
@@ -481,11 +482,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             }
             self.nl.pair_img = img.iter().map(|&c| c as u8).collect();
             let m = r.f64s("nl.moved")?;
-            if m.len() != 2 {
+            // (two values before the bound's frame velocity was kept: the frame at rest)
+            if m.len() != 2 && m.len() != 5 {
                 return Err(bad("list displacement bound has the wrong length".into()));
             }
             self.nl.moved = m[0];
             self.nl.drift_eps = m[1];
+            self.nl.frame_v = if m.len() == 5 {
+                [m[2], m[3], m[4]]
+            } else {
+                [0.0; 3]
+            };
         } else {
             // an older checkpoint: the images follow from the positions at the last build;
             // the displacement since then is not known, so the list is rebuilt

@@ -542,11 +542,21 @@ fn head_on_pairs_are_found_at_the_bound() {
         v.push(V3::new(1.0, 0.0, 0.0));
         v.push(V3::new(-1.0, 0.0, 0.0));
     }
-    let mut p = Particles::new(x, &[1.0; 32], 1.0).unwrap();
-    p.v = v;
-    for prune in [0.0, 1.0, 2.0] {
+    // The bound measures speeds against a frame moving with the middle of the velocity
+    // range: a bulk velocity added to every particle must change neither the contacts
+    // found nor how often the list is rebuilt.
+    let mut builds = Vec::new();
+    for (prune, bulk) in [
+        (0.0, V3::zeros()),
+        (1.0, V3::zeros()),
+        (2.0, V3::zeros()),
+        (0.0, V3::new(7.0, -3.0, 2.0)),
+        (2.0, V3::new(7.0, -3.0, 2.0)),
+    ] {
+        let mut p = Particles::new(x.clone(), &[1.0; 32], 1.0).unwrap();
+        p.v = v.iter().map(|u| u + bulk).collect();
         let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-            p.clone(),
+            p,
             LawParams::new(1e5, 0.9, 0.5),
             OrthoBox::periodic_cube(l).unwrap(),
             NoWalls,
@@ -569,13 +579,19 @@ fn head_on_pairs_are_found_at_the_bound() {
             }
             assert_eq!(
                 s.diag.contacts, brute,
-                "prune_steps {prune}, step {}",
+                "prune_steps {prune}, bulk {bulk:?}, step {}",
                 s.step
             );
             touched += brute;
         }
         assert!(touched > 16, "the pairs must collide");
+        builds.push(s.nl.builds);
     }
+    // (a bound on the largest speed, 7.9 against 1, would rebuild about 8 times as often)
+    assert!(
+        builds[3] <= builds[0] + 1 && builds[4] <= builds[2] + 1,
+        "{builds:?}"
+    );
 }
 
 /// Positions, velocities and (one statistics step) the per-particle stress records of a
