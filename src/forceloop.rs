@@ -75,10 +75,6 @@ struct Scratch {
     rec: Vec<[f64; 4]>,
     /// Owners and keys of the current block of an unpruned chunk.
     dense: DenseBlock,
-    /// New tangential displacements (pass 2).
-    ux: Vec<f64>,
-    uy: Vec<f64>,
-    uz: Vec<f64>,
 }
 
 impl Scratch {
@@ -88,9 +84,6 @@ impl Scratch {
         if self.ids.len() < want {
             self.ids.resize(want, [0; 4]);
             self.rec.resize(want, [0.0; 4]);
-            for v in [&mut self.ux, &mut self.uy, &mut self.uz] {
-                v.resize(want, 0.0);
-            }
         }
     }
 }
@@ -372,6 +365,11 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
         sv: zv,
         u: zv,
     };
+    // the new histories are written in place (`hv0`) as the groups are evaluated
+    if T::FRICTIONAL {
+        hnew.vals.reserve(nc);
+    }
+    let hv0 = hnew.vals.as_mut_ptr().wrapping_add(hnew.vals.len());
     let mut b = 0;
     while b < nc {
         // a short last group repeats its last contact (results not used)
@@ -435,15 +433,17 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             }
         }
         let r = s.law.eval_pairs::<L>(&p, s.dt, D::STREAMING);
-        if T::FRICTIONAL {
-            // the new histories, pushed after the block (list order)
-            let put = |v: &mut Vec<f64>, x: Ln<L>| v[b..b + L].copy_from_slice(&x.0);
-            put(&mut sc.ux, r.u.x);
-            put(&mut sc.uy, r.u.y);
-            put(&mut sc.uz, r.u.z);
-        }
         for l in 0..m {
             let c = b + l;
+            if T::FRICTIONAL {
+                // the new history, in list order, straight into its place
+                // SAFETY: c < nc, and nc places were reserved past hv0 (below the loop, the
+                // length grows by nc once every one of them is written)
+                unsafe {
+                    hv0.add(c)
+                        .write(T::from_array([r.u.x.0[l], r.u.y.0[l], r.u.z.0[l]]))
+                };
+            }
             // SAFETY: c < nc <= the scratch length; li, lj are in the chunk (pass 1: i is,
             // and an in-chunk partner j < i1)
             let [i, j, _, slot] = unsafe { *sc.ids.get_unchecked(c) };
@@ -499,8 +499,8 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
     }
     if T::FRICTIONAL {
         hnew.keys.extend(sc.ids[..nc].iter().map(|e| e[2]));
-        hnew.vals
-            .extend((0..nc).map(|c| T::from_array([sc.ux[c], sc.uy[c], sc.uz[c]])));
+        // SAFETY: places len..len + nc were reserved and written above
+        unsafe { hnew.vals.set_len(hnew.vals.len() + nc) };
     }
 }
 
