@@ -189,7 +189,13 @@ where
     wnew.clear();
     cross.clear();
     cstat.clear();
-    fo.iter_mut().for_each(|f| *f = V3::zeros());
+    if G::ON {
+        // the body force first: one store per particle instead of a zero and a late add
+        let m = &s.mass[i0..i1];
+        fo.iter_mut().zip(m).for_each(|(f, &m)| *f = m * s.g);
+    } else {
+        fo.iter_mut().for_each(|f| *f = V3::zeros());
+    }
     if T::FRICTIONAL {
         // without friction nothing ever writes a torque: they stay zero
         to.iter_mut().for_each(|t| *t = V3::zeros());
@@ -504,7 +510,8 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
     }
 }
 
-/// Pass 3 for particle i: wall contacts and gravity, after all its pair contacts.
+/// Pass 3 for particle i: wall contacts, after all its pair contacts (the body force was
+/// the first term of its sum).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn walls_gravity<F, T, W, G, const STATS: bool>(
@@ -582,9 +589,6 @@ fn walls_gravity<F, T, W, G, const STATS: bool>(
         }
         fo[li] = fsum;
         to[li] = tsum;
-    }
-    if G::ON {
-        fo[li] += s.mass[i] * s.g;
     }
 }
 
