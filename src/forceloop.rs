@@ -262,7 +262,7 @@ where
         };
         for i in b0..b1 {
             let t = (touch >> (i - b0)) & 1 != 0;
-            walls_gravity::<F, T, W, G, STATS>(s, i, i0, t, fo, to, ps, &mut wc, wnew, &mut out);
+            wall_contacts::<F, T, W, STATS>(s, i, i0, t, fo, to, ps, &mut wc, wnew, &mut out);
         }
         b0 = b1;
     }
@@ -514,7 +514,7 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
 /// the first term of its sum).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn walls_gravity<F, T, W, G, const STATS: bool>(
+fn wall_contacts<F, T, W, const STATS: bool>(
     s: &Shared<F, T, impl Domain>,
     i: usize,
     i0: usize,
@@ -529,7 +529,6 @@ fn walls_gravity<F, T, W, G, const STATS: bool>(
     F: Form,
     T: Friction,
     W: Walls<F, T>,
-    G: Body,
 {
     let li = i - i0;
     // most particles touch no wall (`wall_mask`)
@@ -592,7 +591,7 @@ fn walls_gravity<F, T, W, G, const STATS: bool>(
     }
 }
 
-/// Bit l set: particle b0 + l (l < BLOCK) may touch a wall: the test of `walls_gravity`'s
+/// Bit l set: particle b0 + l (l < BLOCK) may touch a wall: the test of `wall_contacts`'s
 /// loop, negated (a NaN gap counts as touching there too).
 #[inline(always)]
 fn wall_mask<F: Form, T: Friction, D>(s: &Shared<F, T, D>, b0: usize, b1: usize) -> u32 {
