@@ -25,6 +25,8 @@ use std::cell::RefCell;
 use crate::neighbor::BLOCK;
 /// Contacts per lane group of the law.
 const LANES: usize = 4;
+/// Pass 1 prefetches the partners' positions this many pairs ahead.
+const AHEAD: usize = 16;
 
 /// What every chunk reads.
 pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
@@ -734,6 +736,18 @@ mod avx {
             for &j in &js {
                 // SAFETY: a prefetch of an address in the array
                 unsafe { _mm_prefetch::<_MM_HINT_T0>(s.kin.as_ptr().add(j as usize) as *const i8) };
+            }
+            // and the position records of the partners a few groups ahead
+            if k + super::AHEAD + 4 <= ke {
+                for l in 0..4 {
+                    // SAFETY: k + AHEAD + l < ke <= pair_key.len(); keys < span <= the
+                    // list's length; a prefetch of an address in the array
+                    unsafe {
+                        let q = *pair_key.get_unchecked(k + super::AHEAD + l) as usize;
+                        let j = *pair_j.get_unchecked(q) as usize;
+                        _mm_prefetch::<_MM_HINT_T0>(xr.as_ptr().add(j) as *const i8);
+                    }
+                }
             }
             let [dx, dy, dz, rs] = transpose(rec[0], rec[1], rec[2], rec[3]);
             let r2 = _mm256_add_pd(
