@@ -1493,7 +1493,7 @@ mod wide {
         let (px, pv, pw, pf, pt) = (ptr(x), ptr(v), ptr(w), ptr(f), ptr(t));
         let vdt = _mm256_set1_pd(dt);
         let uf = _mm256_setr_pd(u[0], u[1], u[2], 0.0);
-        let mut vm = 0.0f64;
+        let mut vm = _mm_setzero_pd();
         let (mut vlo, mut vhi) = (
             _mm256_set1_pd(f64::INFINITY),
             _mm256_set1_pd(f64::NEG_INFINITY),
@@ -1530,7 +1530,9 @@ mod wide {
                 let xn = _mm256_add_pd(ld3(px.add(o)), _mm256_mul_pd(vn, vdt));
                 st3(px.add(o), xn);
                 let [vx, vy, vz, _] = lanes(_mm256_sub_pd(vn, uf));
-                vm = vm.max(vx * vx + vy * vy + vz * vz);
+                // maxsd(new, acc) keeps acc for a NaN, as f64::max does, without the
+                // latter's NaN fix-up on the loop-carried chain
+                vm = _mm_max_sd(_mm_set_sd(vx * vx + vy * vy + vz * vz), vm);
                 // (as f64::min/max for numbers; NaN is reported by the finite check)
                 vlo = _mm256_min_pd(vlo, vn);
                 vhi = _mm256_max_pd(vhi, vn);
@@ -1555,7 +1557,7 @@ mod wide {
         }
         let ([l0, l1, l2, _], [h0, h1, h2, _]) = (lanes(vlo), lanes(vhi));
         Drift {
-            m2: vm,
+            m2: _mm_cvtsd_f64(vm),
             lo: [l0, l1, l2],
             hi: [h0, h1, h2],
         }
