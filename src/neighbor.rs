@@ -28,15 +28,20 @@ const BUILD_CHUNK: usize = 512;
 /// Particles per work unit of the force loop, from the number of particles alone (never from
 /// the thread count): a pair whose two particles lie in the same chunk is summed in place by
 /// that chunk, a pair that crosses into a later chunk goes through a buffer (`cross_*`), and
-/// both orders depend only on the list, so any number of threads gives the same bits. Small
-/// systems get 256 (enough chunks to balance the threads), large ones up to 4096 (fewer
-/// cross-chunk pairs and a chunk's data still in L2: +12 % at 1e6 particles on one thread,
-/// 1.9x on two).
+/// both orders depend only on the list, so any number of threads gives the same bits.
+///
+/// Chunks are as large as the 16-bit owner indices allow (4096) but at least four, a multiple
+/// of four of equal size (so that 1, 2 or 4 threads get equal shares), and no smaller than
+/// 256. Large chunks keep most pairs in place: at 6754 particles 4 chunks of 1689 have 0.11
+/// of the pairs crossing against 0.28 with 27 chunks of 256, and run 9 % faster on one
+/// thread and 5 % on two (`benchmarks/NOTES.md`).
 pub fn chunk_size(n: usize) -> usize {
-    let target = (n / 32).max(1);
-    let p2 = 1usize << (usize::BITS - 1 - target.leading_zeros());
-    p2.clamp(256, 4096)
+    let k = n.div_ceil(MAX_CHUNK).max(4).next_multiple_of(4);
+    n.div_ceil(k).clamp(256, MAX_CHUNK)
 }
+
+/// Largest force-loop chunk (owners are 16-bit offsets within a chunk).
+pub const MAX_CHUNK: usize = 4096;
 
 #[derive(Clone, Debug)]
 pub struct NeighborList {
