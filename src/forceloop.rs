@@ -262,9 +262,12 @@ where
         } else {
             0
         };
-        for i in b0..b1 {
-            let t = (touch >> (i - b0)) & 1 != 0;
-            wall_contacts::<F, T, W, STATS>(s, i, i0, t, fo, to, ps, &mut wc, wnew, &mut out);
+        // only the particles that may touch, in order (the wall histories' keys ascend)
+        let mut m = touch;
+        while m != 0 {
+            let i = b0 + m.trailing_zeros() as usize;
+            m &= m - 1;
+            wall_contacts::<F, T, W, STATS>(s, i, i0, fo, to, ps, &mut wc, wnew, &mut out);
         }
         b0 = b1;
     }
@@ -520,7 +523,6 @@ fn wall_contacts<F, T, W, const STATS: bool>(
     s: &Shared<F, T, impl Domain>,
     i: usize,
     i0: usize,
-    touch: bool,
     fo: &mut [V3],
     to: &mut [V3],
     ps: &mut [[f64; 10]],
@@ -533,8 +535,8 @@ fn wall_contacts<F, T, W, const STATS: bool>(
     W: Walls<F, T>,
 {
     let li = i - i0;
-    // most particles touch no wall (`wall_mask`)
-    if W::ON && touch {
+    // (called only for the particles `wall_mask` found near a wall)
+    if W::ON {
         let mut fsum = fo[li];
         let mut tsum = to[li];
         let [x0, x1, x2, ri] = s.xr[i];
