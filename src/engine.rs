@@ -248,7 +248,8 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// lasts about this many steps at the current largest speed; 0 turns pruning off (the
     /// force loop then tests every listed pair). Results do not depend on it.
     pub prune_steps: f64,
-    /// Largest squared drift velocity of the last step.
+    /// Largest squared drift velocity of the last step relative to the lists' frame
+    /// (`NeighborList::frame_v`).
     vmax2: f64,
 }
 
@@ -706,8 +707,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// `nve_initial` and `pack` in one pass (same arithmetic, same bits): at large N
     /// the step is bound by memory traffic, and this reads each particle once.
-    /// Returns the largest squared drift velocity (the lists' displacement bounds grow by
-    /// it times dt).
+    /// Returns the largest squared drift velocity relative to the lists' frame (their
+    /// displacement bounds grow by it times dt) and the velocities' range (the next frame).
     fn kick_drift_pack(&mut self) -> Drift {
         let ch = chunk_size(self.p.len());
         let n = self.p.len();
@@ -902,24 +903,48 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
         self.pack();
-        self.vmax2 = self.max_speed2();
+        // the lists' frame from the velocities now, so that the first inner list lasts about
+        // `prune_steps` steps like the later ones (and its prune trims the contact lists,
+        // which grow by doubling while the first contacts are stored)
+        let (u, m2) = self.frame_speed2();
+        self.nl.frame_v = u;
+        self.vmax2 = m2;
         self.prune();
         self.evaluate(0.0, 0.0, false);
     }
 
-    /// Largest squared speed of any particle.
-    fn max_speed2(&self) -> f64 {
-        self.p
-            .v
+    /// The middle of the velocities' range (per component) and the largest squared speed
+    /// relative to it.
+    fn frame_speed2(&self) -> ([f64; 3], f64) {
+        let v = &self.p.v;
+        let range = v
             .par_iter()
             .with_min_len(4096)
-            .map(|v| v.norm_squared())
-            .reduce(|| 0.0, f64::max)
+            .fold(
+                || Drift::EMPTY,
+                |mut d, v| {
+                    for c in 0..3 {
+                        d.lo[c] = d.lo[c].min(v[c]);
+                        d.hi[c] = d.hi[c].max(v[c]);
+                    }
+                    d
+                },
+            )
+            .reduce(|| Drift::EMPTY, Drift::merge);
+        let u = range.next_frame();
+        let uv = V3::new(u[0], u[1], u[2]);
+        let m2 = v
+            .par_iter()
+            .with_min_len(4096)
+            .map(|v| (v - uv).norm_squared())
+            .reduce(|| 0.0, f64::max);
+        (u, m2)
     }
 
     /// Rebuild the inner list from the packed positions (after `pack`): the skin is chosen
-    /// so that it lasts `prune_steps` steps at the last step's largest speed (the whole list
-    /// where the domain moves particles itself, or pruning is off).
+    /// so that it lasts `prune_steps` steps at the last step's largest speed relative to the
+    /// lists' frame (the whole list where the domain moves particles itself, or pruning is
+    /// off).
     fn prune(&mut self) {
         let skin = self.nl.skin;
         let s_in = if D::PLAIN_NVE && self.prune_steps > 0.0 {

@@ -104,7 +104,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             "integrator: velocity Verlet (translation + rotation)".to_string(),
             if D::PLAIN_NVE {
                 "neighbours: cell list + Verlet list with skin, pruned to the pairs near contact \
-                 every few steps (the lists' lifetimes from the largest speed)"
+                 every few steps (the lists' lifetimes from the largest speed relative to a \
+                 moving frame)"
                     .to_string()
             } else {
                 "neighbours: cell list + Verlet list with skin".to_string()
