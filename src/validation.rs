@@ -392,19 +392,39 @@ fn one_and_two_threads_bitwise_identical() {
     }
 }
 
-/// A frictional gas (phi = 0.35) in a periodic cube of side l.
-fn periodic_gas(l: f64, seed: u64) -> Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> {
-    let p = gas(0.35, l, seed, SizeDist::Uniform(0.9, 1.1));
+type PeriodicEngine = Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody>;
+
+/// Particles `p` in a periodic cube of side l: linear law kn = 1e5, restitution e, mu = 0.5.
+fn periodic(p: Particles, l: f64, e: f64, skin: f64) -> PeriodicEngine {
     Engine::new(
         p,
-        LawParams::new(1e5, 0.8, 0.5),
+        LawParams::new(1e5, e, 0.5),
         OrthoBox::periodic_cube(l).unwrap(),
         NoWalls,
         NoBody,
         None,
-        0.2,
+        skin,
     )
     .unwrap()
+}
+
+/// A frictional gas (phi = 0.35) in a periodic cube of side l.
+fn periodic_gas(l: f64, seed: u64) -> PeriodicEngine {
+    periodic(gas(0.35, l, seed, SizeDist::Uniform(0.9, 1.1)), l, 0.8, 0.2)
+}
+
+/// Pairs in contact now, by brute force over all pairs (minimum image).
+fn brute_contacts(s: &PeriodicEngine) -> usize {
+    use crate::domain::Domain;
+    let n = s.p.len();
+    let mut c = 0;
+    for i in 0..n {
+        for j in i + 1..n {
+            let r = s.domain.delta(&s.p.x[i], &s.p.x[j]).norm();
+            c += (r < s.p.radius[i] + s.p.radius[j]) as usize;
+        }
+    }
+    c
 }
 
 #[test]
@@ -486,36 +506,19 @@ fn list_bounds_miss_no_contact() {
     // being tested. Count the contacts of every pair by brute force after each step of a
     // fast, dense gas (small skin, frequent builds and prunes) and compare with the contacts
     // the force loop found.
-    use crate::domain::Domain;
     let l = 8.0;
     let mut p = gas(0.35, l, 23, SizeDist::Uniform(0.8, 1.2));
     for v in p.v.iter_mut() {
         *v *= 5.0;
     }
-    let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-        p,
-        LawParams::new(1e5, 0.9, 0.5),
-        OrthoBox::periodic_cube(l).unwrap(),
-        NoWalls,
-        NoBody,
-        None,
-        0.3,
-    )
-    .unwrap();
+    let mut s = periodic(p, l, 0.9, 0.3);
     s.prune_steps = 2.0;
     let (b0, q0) = (s.nl.builds, s.nl.prunes);
-    let n = s.p.len();
     let (mut seen, mut kept) = (0, 0.0f64);
     for _ in 0..600 {
         s.run(1).unwrap();
         kept = kept.max(s.nl.inner_len() as f64 / s.nl.len() as f64);
-        let mut brute = 0;
-        for i in 0..n {
-            for j in i + 1..n {
-                let r = s.domain.delta(&s.p.x[i], &s.p.x[j]).norm();
-                brute += (r < s.p.radius[i] + s.p.radius[j]) as usize;
-            }
-        }
+        let brute = brute_contacts(&s);
         assert_eq!(s.diag.contacts, brute, "step {}", s.step);
         seen += brute;
     }
@@ -531,7 +534,6 @@ fn head_on_pairs_are_found_at_the_bound() {
     // largest speed, from gaps spread over the whole skin. Every contact must be found at
     // the step it forms (a bound too small by any factor misses some: the gaps span three
     // skins, so some pairs enter the list only at a later build).
-    use crate::domain::Domain;
     let l = 20.0;
     let (mut x, mut v) = (Vec::new(), Vec::new());
     for k in 0..16 {
@@ -555,28 +557,12 @@ fn head_on_pairs_are_found_at_the_bound() {
     ] {
         let mut p = Particles::new(x.clone(), &[1.0; 32], 1.0).unwrap();
         p.v = v.iter().map(|u| u + bulk).collect();
-        let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-            p,
-            LawParams::new(1e5, 0.9, 0.5),
-            OrthoBox::periodic_cube(l).unwrap(),
-            NoWalls,
-            NoBody,
-            None,
-            0.3,
-        )
-        .unwrap();
+        let mut s = periodic(p, l, 0.9, 0.3);
         s.prune_steps = prune;
         let mut touched = 0;
         for _ in 0..3000 {
             s.run(1).unwrap();
-            let n = s.p.len();
-            let mut brute = 0;
-            for i in 0..n {
-                for j in i + 1..n {
-                    let r = s.domain.delta(&s.p.x[i], &s.p.x[j]).norm();
-                    brute += (r < s.p.radius[i] + s.p.radius[j]) as usize;
-                }
-            }
+            let brute = brute_contacts(&s);
             assert_eq!(
                 s.diag.contacts, brute,
                 "prune_steps {prune}, bulk {bulk:?}, step {}",
