@@ -453,7 +453,7 @@ impl NeighborList {
         let mut total = 0u32;
         for ic in &self.inner {
             self.cross_off.push(total);
-            total += ic.ncross;
+            total += ic.xj.len() as u32;
         }
         self.cross_off.push(total);
         self.cross_start.clear();
@@ -524,7 +524,6 @@ fn prune_chunk(
         ic.xj.clear();
         ic.xj
             .extend(pair_j[kb..ke].iter().filter(|&&j| j as usize >= i1));
-        ic.ncross = ic.xj.len() as u32;
         return;
     }
     ic.dense = false;
@@ -581,7 +580,6 @@ fn prune_chunk(
         ic.own.extend_from_slice(&owns[..len]);
         ic.xj.clear();
         ic.xj.extend_from_slice(&xjs[..ncross]);
-        ic.ncross = ncross as u32;
     });
 }
 
@@ -607,10 +605,9 @@ pub struct InnerChunk {
     /// First particle of each pair, counted from the chunk's first particle (chunks hold at
     /// most 4096 particles).
     pub own: Vec<u16>,
-    /// Pairs whose second particle lies in a later chunk.
-    pub ncross: u32,
-    /// Their second particles, in list order (numbering the cross pairs at a prune reads
-    /// these instead of walking every kept pair again).
+    /// Second particles of the pairs that reach into a later chunk (cross pairs), in list
+    /// order (numbering the cross pairs at a prune reads these instead of walking every
+    /// kept pair again).
     pub xj: Vec<u32>,
     /// Every pair of the chunk kept (no pruning: an infinite inner skin): `key` and `own`
     /// stay empty, the keys are 0..span and the owners follow from the list's offsets.
