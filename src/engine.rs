@@ -923,10 +923,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .fold(
                 || Drift::EMPTY,
                 |mut d, v| {
-                    for c in 0..3 {
-                        d.lo[c] = d.lo[c].min(v[c]);
-                        d.hi[c] = d.hi[c].max(v[c]);
-                    }
+                    d.include(v);
                     d
                 },
             )
@@ -1384,6 +1381,15 @@ impl Drift {
         hi: [f64::NEG_INFINITY; 3],
     };
 
+    /// Widen the velocity range to include `v`.
+    #[inline(always)]
+    fn include(&mut self, v: &V3) {
+        for c in 0..3 {
+            self.lo[c] = self.lo[c].min(v[c]);
+            self.hi[c] = self.hi[c].max(v[c]);
+        }
+    }
+
     fn merge(a: Drift, b: Drift) -> Drift {
         Drift {
             m2: a.m2.max(b.m2),
@@ -1638,10 +1644,7 @@ fn kdp<T: Friction>(k: KickChunk) -> Drift {
         x[l] = xn;
         let d = vn - uf;
         vm = vm.max(d.x * d.x + d.y * d.y + d.z * d.z);
-        for c in 0..3 {
-            dr.lo[c] = dr.lo[c].min(vn[c]);
-            dr.hi[c] = dr.hi[c].max(vn[c]);
-        }
+        dr.include(&vn);
         // without friction there are no torques: spins never change
         if T::FRICTIONAL {
             wl += tl * hi;
