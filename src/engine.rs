@@ -36,6 +36,8 @@ use crate::{M3, V3};
 use rayon::prelude::*;
 use std::time::Instant;
 
+mod team;
+
 /// Target lifetime, in steps, of the inner (pruned) pair list: measured on the channel
 /// workload of issue 6 (benchmarks/NOTES.md).
 pub const DEFAULT_PRUNE_STEPS: f64 = 16.0;
@@ -251,6 +253,9 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Largest squared drift velocity of the last step relative to the lists' frame
     /// (`NeighborList::frame_v`).
     vmax2: f64,
+    /// Run stretches of plain steps in one team of threads (`team`); the results are the
+    /// same bits either way (off: every step forks and joins its passes through rayon).
+    pub team: bool,
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
@@ -355,6 +360,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross_pending: false,
             prune_steps: DEFAULT_PRUNE_STEPS,
             vmax2: f64::INFINITY,
+            team: true,
         };
         e.rebuild();
         e.compute_forces_setup();
@@ -583,10 +589,44 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Advance `n` steps.
     pub fn run(&mut self, n: u64) -> Result<()> {
         self.ensure_forces()?;
-        for k in 0..n {
+        let mut k = 0;
+        while k < n {
+            // plain steps that need nothing but forces run in one team of threads
+            let budget = self.team_budget(n - k);
+            if budget > 0 && self.team_ready() {
+                if let Some((done, exit)) = self.team_steps(budget) {
+                    k += done;
+                    match exit {
+                        team::TeamExit::Done => {}
+                        team::TeamExit::Overlap => {
+                            let r = self.check_overlap();
+                            self.complete_step();
+                            return r;
+                        }
+                        team::TeamExit::Outside { moved } => {
+                            self.step_finish(moved, k + 1 < n, Instant::now())?;
+                            k += 1;
+                        }
+                    }
+                    continue;
+                }
+            }
             self.step_once(k + 1 < n)?;
+            k += 1;
         }
         Ok(())
+    }
+
+    /// How many of the next `left` steps of a run a team may take: each must be followed by
+    /// another step of the run and have no guard check due (see `step_once`).
+    fn team_budget(&self, left: u64) -> u64 {
+        let ce = self.guards.check_every;
+        let to_check = if ce == 0 {
+            u64::MAX
+        } else {
+            (ce - (self.step + 1) % ce) % ce
+        };
+        (left - 1).min(to_check)
     }
 
     /// One step. `more`: another step of the same `run` follows, so (plain NVE, no
@@ -610,6 +650,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.domain.integrate_initial(&mut self.p, dt);
             self.pack()
         };
+        self.step_finish(moved, more, t0)
+    }
+
+    /// The rest of a step after its first pass (`moved`: the list's displacement bound
+    /// reached half the skin; `t0`: when the step began).
+    fn step_finish(&mut self, moved: bool, more: bool, t0: Instant) -> Result<()> {
+        let dt = self.dt;
         self.domain.check(self.step)?;
         let t1 = Instant::now();
         if moved || !self.nl.valid || self.domain.rebuild_due(self.nl.skin) {
@@ -1096,20 +1143,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         std::mem::swap(&mut self.whist, &mut self.whist_next);
 
         let tp = Instant::now();
-        let mut diag = StepDiag::default();
-        for o in &results {
-            if o.max_ov > diag.max_overlap {
-                diag.max_overlap = o.max_ov;
-                diag.max_overlap_at = o.at;
-            }
-            diag.virial += o.vir;
-            diag.contacts += o.contacts;
-            for (acc, w) in diag.wall_force.iter_mut().zip(&o.wall_force) {
-                *acc += *w;
-            }
-        }
-
-        self.diag = diag;
+        self.diag = reduce_outs(&results);
         if defer && kick > 0.0 && !STATS {
             self.cross_pending = true;
         } else {
@@ -1169,6 +1203,23 @@ pub(crate) struct ChunkOut {
     pub vir: M3,
     pub contacts: usize,
     pub wall_force: [V3; MAX_WALLS],
+}
+
+/// The step's diagnostics from the chunks' reports, in chunk order.
+fn reduce_outs(results: &[ChunkOut]) -> StepDiag {
+    let mut diag = StepDiag::default();
+    for o in results {
+        if o.max_ov > diag.max_overlap {
+            diag.max_overlap = o.max_ov;
+            diag.max_overlap_at = o.at;
+        }
+        diag.virial += o.vir;
+        diag.contacts += o.contacts;
+        for (acc, w) in diag.wall_force.iter_mut().zip(&o.wall_force) {
+            *acc += *w;
+        }
+    }
+    diag
 }
 
 /// Each chunk's slice of the per-particle statistics (empty slices when not asked for).

@@ -452,6 +452,98 @@ fn deferred_cross_pass_changes_no_bits() {
     }
 }
 
+/// Everything a walled run carries between steps, for bitwise comparisons.
+fn walled_state<F: Form>(s: &WalledGas<F>) -> (Vec<[f64; 9]>, Vec<f64>, u64) {
+    let mut by_id = vec![[0.0; 9]; s.p.len()];
+    for i in 0..s.p.len() {
+        let (x, v, w) = (s.p.x[i], s.p.v[i], s.p.omega[i]);
+        by_id[s.p.id[i] as usize] = [x.x, x.y, x.z, v.x, v.y, v.z, w.x, w.y, w.z];
+    }
+    let mut scalars: Vec<f64> = s
+        .wall_impulse
+        .iter()
+        .flat_map(|w| w.iter().copied())
+        .collect();
+    scalars.extend(s.diag.wall_force.iter().flat_map(|w| w.iter().copied()));
+    scalars.extend([s.time, s.diag.max_overlap, s.diag.contacts as f64]);
+    (by_id, scalars, s.step)
+}
+
+#[test]
+fn team_steps_change_no_bits() {
+    // Stretches of plain steps run in one team of threads (`engine::team`): the same bits
+    // as stepping through rayon, with walls, gravity, builds and prunes inside the run, for
+    // one and two threads; and two runs sharing a pool at once (one team at a time: the
+    // other steps the usual way) neither deadlock nor change.
+    let run = |team: bool, threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
+            s.team = team;
+            s.run(700).unwrap();
+            (walled_state(&s), s.nl.builds, s.nl.prunes)
+        })
+    };
+    let (want, builds, prunes) = run(false, 2);
+    assert!(builds > 1 && prunes > 3, "builds {builds} prunes {prunes}");
+    assert!(want.1[..3].iter().any(|&c| c != 0.0), "no wall impulse");
+    assert_eq!(run(true, 2).0, want);
+    assert_eq!(run(true, 1).0, want);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let (a, b) = pool.install(|| {
+        let go = || {
+            let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
+            s.run(700).unwrap();
+            walled_state(&s)
+        };
+        rayon::join(go, go)
+    });
+    assert_eq!(a, want);
+    assert_eq!(b, want);
+}
+
+#[test]
+fn team_stops_at_the_same_overlap_error() {
+    // The overlap guard trips inside a team's stretch: the same step, message and state as
+    // without the team.
+    let mk = |team: bool| {
+        // gravity strong enough that the wall layers compress over a few hundred steps
+        let mut s = walled_gas::<Hooke>(10.0, 29, 0.7, V3::new(-3000.0, 0.0, 0.0));
+        s.team = team;
+        s
+    };
+    // the largest overlap over the first 100 and 300 steps of a reference run; a guard
+    // between them trips between steps 100 and 300
+    let mut r = mk(false);
+    let mut peak = [0.0f64; 2];
+    for k in 0..300 {
+        r.run(1).unwrap();
+        peak[(k >= 100) as usize] = peak[(k >= 100) as usize].max(r.diag.max_overlap);
+    }
+    assert!(peak[1] > peak[0] * 1.05, "overlaps do not grow: {peak:?}");
+    let limit = 0.5 * (peak[0] + peak[1]);
+    let stop = |team: bool| {
+        let mut s = mk(team);
+        s.guards.max_overlap = limit;
+        let err = s.run(1000).unwrap_err();
+        (err.to_string(), walled_state(&s))
+    };
+    let (msg, state) = stop(false);
+    assert!(msg.contains("overlap"), "{msg}");
+    assert!(
+        state.2 > 100 && state.2 <= 300,
+        "stopped at step {}",
+        state.2
+    );
+    assert_eq!(stop(true), (msg, state));
+}
+
 /// A walled frictional gas with gravity run with the inner list pruned to last `prune_steps`
 /// steps (0: not pruned): positions, velocities and spins by id, and (prunes, builds, mean
 /// inner / listed pairs).

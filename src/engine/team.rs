@@ -1,0 +1,473 @@
+//! Plain steps run by one team of threads: one parallel region for a stretch of steps
+//! instead of two per step.
+//!
+//! At the channel (6754 particles) a step takes ~0.2 ms on two threads, and each of
+//! the step's two parallel passes (half-kick/drift/pack, then forces) is only a few chunks
+//! long. Handing each pass to rayon cost about a tenth of the threads' time in waiting
+//! (perf: `sched_yield` and work stealing, and one thread late to each pass, so the half-kick
+//! pass ran 62:38 between the two). A team enters one `rayon::broadcast` and meets at a
+//! spin barrier after each pass; within a pass its threads take pieces from an atomic
+//! counter (the half-kick pass in pieces a quarter of a chunk, the force loop by chunk), so
+//! a thread that arrives late takes fewer pieces.
+//!
+//! Determinism is unchanged: every piece and chunk computes exactly what it computes
+//! outside the team (a chunk's sums have the order of the list), the displacement bounds are
+//! maxima and minima (the same for any grouping), and every decision to leave the team is
+//! taken by each thread from the same values.
+//!
+//! The team runs only plain NVE steps that need nothing else: no list build, no prune, no
+//! statistics or virial, no guard check, and a following step in the same `run` (the cross
+//! pass and final half-kick are deferred, as in `step_once`). A step that needs more is
+//! finished outside once its first pass is done. One team runs at a time in the process
+//! (two teams sharing a rayon pool could each hold one thread and wait for the other's);
+//! a run that finds the team taken steps the usual way.
+
+use super::*;
+use crate::forceloop::{ChunkIo, Shared};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, TryLockError};
+
+/// One team at a time per process (see the module notes).
+static TEAM: Mutex<()> = Mutex::new(());
+
+/// Half-kick pass pieces per force-loop chunk (its split is free: per-particle work).
+const KICK_SPLIT: usize = 4;
+
+/// A barrier the team's threads spin on (the passes between barriers are tens of
+/// microseconds; a sleeping thread would take as long to wake). After a few thousand
+/// spins a waiting thread yields its core, so an oversubscribed machine still progresses.
+struct Barrier {
+    n: usize,
+    count: AtomicUsize,
+    generation: AtomicUsize,
+    /// Set when a thread of the team panics: the others stop waiting and panic too (the
+    /// broadcast then reports the panic), instead of spinning forever.
+    poisoned: AtomicBool,
+}
+
+impl Barrier {
+    fn new(n: usize) -> Self {
+        Barrier {
+            n,
+            count: AtomicUsize::new(0),
+            generation: AtomicUsize::new(0),
+            poisoned: AtomicBool::new(false),
+        }
+    }
+
+    /// Wait for every thread of the team. Release/acquire: what a thread wrote before the
+    /// barrier is seen by every thread after it.
+    fn wait(&self) {
+        let g = self.generation.load(Ordering::Acquire);
+        if self.count.fetch_add(1, Ordering::AcqRel) + 1 == self.n {
+            self.count.store(0, Ordering::Relaxed);
+            self.generation.store(g.wrapping_add(1), Ordering::Release);
+            return;
+        }
+        let mut spins = 0u32;
+        while self.generation.load(Ordering::Acquire) == g {
+            assert!(
+                !self.poisoned.load(Ordering::Relaxed),
+                "another thread of the step team panicked"
+            );
+            if spins < 4000 {
+                spins += 1;
+                std::hint::spin_loop();
+            } else {
+                std::thread::yield_now();
+            }
+        }
+    }
+}
+
+/// Poisons the barrier if its thread unwinds.
+struct PoisonOnPanic<'a>(&'a Barrier);
+
+impl Drop for PoisonOnPanic<'_> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.poisoned.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
+/// A pointer the team's threads share; each pass writes disjoint ranges through it, and
+/// passes are separated by the barrier.
+#[derive(Clone, Copy)]
+struct Ptr<X>(*mut X);
+// SAFETY: used only as described above (disjoint writes within a pass, barrier between)
+unsafe impl<X> Send for Ptr<X> {}
+unsafe impl<X> Sync for Ptr<X> {}
+
+impl<X> Ptr<X> {
+    /// # Safety
+    /// `r` lies within the allocation and no other thread touches it during the pass.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn slice_mut(&self, r: std::ops::Range<usize>) -> &mut [X] {
+        unsafe { std::slice::from_raw_parts_mut(self.0.add(r.start), r.end - r.start) }
+    }
+    /// # Safety
+    /// `r` lies within the allocation and no thread writes it during the pass.
+    unsafe fn slice(&self, r: std::ops::Range<usize>) -> &[X] {
+        unsafe { std::slice::from_raw_parts(self.0.add(r.start), r.end - r.start) }
+    }
+}
+
+/// Pieces of a pass claimed by the threads of a team. Each thread has a home range (the same
+/// particles in both passes and every step, so they stay in its core's cache), takes its
+/// own pieces first, then the others' from their far ends (a thread that finishes early
+/// helps the slowest without taking what the owner is about to start).
+struct Claims {
+    /// The pass that last claimed each piece.
+    by: Vec<AtomicUsize>,
+    /// Per thread its order of pieces.
+    order: Vec<Vec<usize>>,
+}
+
+impl Claims {
+    /// `pieces` pieces, `per_chunk` of them per force-loop chunk; the chunks are dealt to the
+    /// threads back and forth (0, 1, 1, 0 for two threads and four chunks): early chunks
+    /// send the cross-chunk pairs (more force-loop work), late ones receive them (more
+    /// half-kick work), so each thread gets some of both.
+    fn new(pieces: usize, per_chunk: usize, threads: usize) -> Self {
+        let owner = |k: usize| {
+            let c = k / per_chunk;
+            if (c / threads).is_multiple_of(2) {
+                c % threads
+            } else {
+                threads - 1 - c % threads
+            }
+        };
+        let home = |t: usize| (0..pieces).filter(move |&k| owner(k) == t);
+        let order = (0..threads)
+            .map(|t| {
+                let mut o: Vec<usize> = home(t).collect();
+                for d in 1..threads {
+                    let mut other: Vec<usize> = home((t + d) % threads).collect();
+                    other.reverse();
+                    o.extend(other);
+                }
+                o
+            })
+            .collect();
+        Claims {
+            by: (0..pieces).map(|_| AtomicUsize::new(0)).collect(),
+            order,
+        }
+    }
+
+    /// The pieces thread `me` gets in pass `pass` (numbered from 1, never reused).
+    fn take(&self, me: usize, pass: usize) -> impl Iterator<Item = usize> + '_ {
+        self.order[me]
+            .iter()
+            .copied()
+            .filter(move |&k| self.by[k].swap(pass, Ordering::Relaxed) != pass)
+    }
+}
+
+/// How a team stint ended.
+pub(super) enum TeamExit {
+    /// The steps asked for are done (the last one's cross pass deferred).
+    Done,
+    /// A step's first pass is done and the step needs what the team does not do (a build,
+    /// a prune, a failed domain check): `step_finish` completes it with this `moved`.
+    Outside { moved: bool },
+    /// The last step's force evaluation exceeded the overlap guard (`check_overlap` reports).
+    Overlap,
+}
+
+/// The displacement bounds each thread keeps (the same on all: they see the same drifts).
+#[derive(Clone, Copy)]
+struct Track {
+    moved: f64,
+    inner_moved: f64,
+    frame_v: [f64; 3],
+    vmax2: f64,
+}
+
+impl<F, T, D, W, G> Engine<F, T, D, W, G>
+where
+    F: Form,
+    T: Friction,
+    D: Domain,
+    W: Walls<F, T>,
+    G: Body,
+{
+    /// Whether the next steps may run in a team: plain NVE, nothing but forces asked for, the
+    /// lists and forces valid.
+    pub(super) fn team_ready(&self) -> bool {
+        let n = self.p.len();
+        self.team
+            && D::PLAIN_NVE
+            && !D::NEEDS_VIRIAL
+            && !self.want_virial
+            && !self.want_stats
+            && self.forces_valid
+            && self.nl.valid
+            && self.nl.inner_valid
+            && self.nl.own_start.len() == n + 1
+            && self.xr.len() == n
+            && self.kin.len() == n
+            && self.hist.len() == n.div_ceil(chunk_size(n))
+            && self.cross_idx.len() == self.nl.n_cross()
+    }
+
+    /// Up to `budget` plain steps (each followed by another step of the same run, none with
+    /// a guard check due) in one team. Returns the steps completed and how the stint ended;
+    /// `None` when another team holds the process's team (step the usual way).
+    pub(super) fn team_steps(&mut self, budget: u64) -> Option<(u64, TeamExit)> {
+        let _guard = match TEAM.try_lock() {
+            Ok(g) => g,
+            Err(TryLockError::Poisoned(e)) => e.into_inner(),
+            Err(TryLockError::WouldBlock) => return None,
+        };
+        let n = self.p.len();
+        let ch = chunk_size(n);
+        let nch = n.div_ceil(ch);
+        let kp = ch.div_ceil(KICK_SPLIT);
+        let nkp = nch * KICK_SPLIT;
+        let dt = self.dt;
+        let h = 0.5 * dt;
+        let step0 = self.step;
+        let first_pending = self.cross_pending;
+        let track0 = Track {
+            moved: self.nl.moved,
+            inner_moved: self.nl.inner_moved,
+            frame_v: self.nl.frame_v,
+            vmax2: self.vmax2,
+        };
+        let wf0 = self.diag.wall_force;
+
+        // what the passes write, as shared pointers; what they only read, as references
+        let Particles {
+            x,
+            v,
+            omega,
+            force,
+            torque,
+            radius,
+            mass,
+            inv_mass,
+            inv_inertia,
+            ..
+        } = &mut self.p;
+        let (px, pv, pw, pf, pt) = (
+            Ptr(x.as_mut_ptr()),
+            Ptr(v.as_mut_ptr()),
+            Ptr(omega.as_mut_ptr()),
+            Ptr(force.as_mut_ptr()),
+            Ptr(torque.as_mut_ptr()),
+        );
+        let (pxr, pkin) = (Ptr(self.xr.as_mut_ptr()), Ptr(self.kin.as_mut_ptr()));
+        // the histories alternate between the two sets of lists, step by step
+        let phist = [
+            Ptr(self.hist.as_mut_ptr()),
+            Ptr(self.hist_next.as_mut_ptr()),
+        ];
+        let pwhist = [
+            Ptr(self.whist.as_mut_ptr()),
+            Ptr(self.whist_next.as_mut_ptr()),
+        ];
+        let pcross = Ptr(self.cross.as_mut_ptr());
+        let pcstat = Ptr(self.cross_stats.as_mut_ptr());
+        let pcidx = Ptr(self.cross_idx.as_mut_ptr());
+        let ncidx = self.cross_idx.len();
+        let (rad, im, ii, mass): (&[f64], &[f64], &[f64], &[f64]) =
+            (radius, inv_mass, inv_inertia, mass);
+        let (nl, law, dom) = (&self.nl, &self.law, &self.domain);
+        let (planes, wlaw, g) = (self.walls.planes(), self.walls.law(), self.body.g());
+        let max_ov = self.guards.max_overlap;
+        let shifts = image_shifts(&dom.h());
+
+        let threads = rayon::current_num_threads();
+        let barrier = Barrier::new(threads);
+        let kick_claims = Claims::new(nkp, KICK_SPLIT, threads);
+        let chunk_claims = Claims::new(nch, 1, threads);
+        // per thread its drift of the pass, per chunk its report (each written by one thread
+        // in a pass, read by all after the barrier)
+        let mut drifts = vec![Drift::EMPTY; threads];
+        let mut outs: Vec<ChunkOut> = (0..nch).map(|_| ChunkOut::default()).collect();
+        let (pdrift, pouts) = (Ptr(drifts.as_mut_ptr()), Ptr(outs.as_mut_ptr()));
+        // the leader's (thread 0's) account: pass times, wall impulses and the last forces
+        let leader: Mutex<(f64, f64)> = Mutex::new((0.0, 0.0));
+        let wall_sum: Mutex<([V3; MAX_WALLS], [V3; MAX_WALLS])> =
+            Mutex::new((self.wall_impulse, wf0));
+
+        let results = rayon::broadcast(|ctx| {
+            let me = ctx.index();
+            let _poison = PoisonOnPanic(&barrier);
+            let mut track = track0;
+            let mut pending = first_pending;
+            let mut done = 0u64;
+            loop {
+                let tk = Instant::now();
+                // pass 1: the last step's cross pass and final half-kick, this step's
+                // half-kick, drift and records
+                let mut dr = Drift::EMPTY;
+                // SAFETY (the pass): each piece is taken once (the counter), the pieces are
+                // disjoint ranges of the per-particle arrays, and nothing else is written
+                // during the pass; the cross buffers and index are only read
+                for k in kick_claims.take(me, 1 + done as usize) {
+                    // sub-piece k % KICK_SPLIT of chunk k / KICK_SPLIT
+                    let c0 = (k / KICK_SPLIT) * ch;
+                    let c1 = (c0 + ch).min(n);
+                    let a = (c0 + (k % KICK_SPLIT) * kp).min(c1);
+                    let r = a..(a + kp).min(c1);
+                    let src = KickSrc {
+                        im: &im[r.clone()],
+                        ii: &ii[r.clone()],
+                        rad: &rad[r.clone()],
+                    };
+                    let d = unsafe {
+                        let cross = pcross.slice(0..nch);
+                        let cstat = pcstat.slice(0..nch);
+                        let cidx = pcidx.slice(0..ncidx);
+                        let cx = pending.then(|| {
+                            CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r.clone(), h)
+                        });
+                        kick_drift_pack_chunk::<T>(KickChunk {
+                            x: px.slice_mut(r.clone()),
+                            v: pv.slice_mut(r.clone()),
+                            w: pw.slice_mut(r.clone()),
+                            f: pf.slice_mut(r.clone()),
+                            t: pt.slice_mut(r.clone()),
+                            a: pxr.slice_mut(r.clone()),
+                            b: pkin.slice_mut(r.clone()),
+                            s: &src,
+                            pend: cx.as_ref(),
+                            h,
+                            dt,
+                            u: track.frame_v,
+                        })
+                    };
+                    dr = Drift::merge(dr, d);
+                }
+                // SAFETY: slot `me` is this thread's alone during the pass
+                unsafe { *pdrift.0.add(me) = dr };
+                barrier.wait();
+                // SAFETY: nobody writes the slots until the next pass (after a barrier)
+                let dr = unsafe { pdrift.slice(0..threads) }
+                    .iter()
+                    .fold(Drift::EMPTY, |a, d| Drift::merge(a, *d));
+                pending = true;
+                // the bounds of `step_once`, on every thread alike
+                track.vmax2 = dr.m2;
+                let dd = dr.m2.sqrt() * dt + nl.drift_eps;
+                track.moved += dd;
+                track.inner_moved += dd;
+                track.frame_v = dr.next_frame();
+                let moved = 2.0 * track.moved >= nl.skin;
+                let step = step0 + done;
+                if moved
+                    || dom.check(step).is_err()
+                    || dom.rebuild_due(nl.skin)
+                    || 2.0 * track.inner_moved >= nl.inner_skin
+                {
+                    return (done, track, TeamExit::Outside { moved });
+                }
+                let tf = Instant::now();
+                // pass 2: forces, chunk by chunk
+                let par = (done % 2) as usize;
+                for c in chunk_claims.take(me, 1 + done as usize) {
+                    let r = c * ch..((c + 1) * ch).min(n);
+                    let (c0, c1) = (nl.cross_off[c] as usize, nl.cross_off[c + 1] as usize);
+                    // SAFETY (the pass): each chunk is taken once; it writes its own range of
+                    // forces and torques, its own history lists, cross buffer and cross
+                    // slots; the records and positions are only read
+                    let o = unsafe {
+                        let shared = Shared {
+                            law,
+                            dom,
+                            planes,
+                            wlaw,
+                            g,
+                            inner: &nl.inner,
+                            own_start: &nl.own_start,
+                            pair_j: &nl.pair_j,
+                            pair_img: &nl.pair_img,
+                            shifts,
+                            xr: pxr.slice(0..n),
+                            kin: pkin.slice(0..n),
+                            mass,
+                            dt,
+                            ch,
+                        };
+                        let io = ChunkIo {
+                            fo: pf.slice_mut(r.clone()),
+                            to: pt.slice_mut(r.clone()),
+                            hold: &*phist[par].0.add(c),
+                            hnew: &mut *phist[1 - par].0.add(c),
+                            wold: &*pwhist[par].0.add(c),
+                            wnew: &mut *pwhist[1 - par].0.add(c),
+                            cross: &mut *pcross.0.add(c),
+                            cstat: &mut *pcstat.0.add(c),
+                            cidx: pcidx.slice_mut(c0..c1),
+                            ps: &mut [],
+                        };
+                        crate::forceloop::chunk::<F, T, D, W, G, false, false>(&shared, c, io)
+                    };
+                    // SAFETY: chunk c's report is written by the thread that took it
+                    unsafe { *pouts.0.add(c) = o };
+                }
+                barrier.wait();
+                done += 1;
+                // SAFETY: the reports are read only until the next force pass (two barriers on)
+                let diag = reduce_outs(unsafe { pouts.slice(0..nch) });
+                if me == 0 {
+                    let te = Instant::now();
+                    let mut l = leader.lock().unwrap();
+                    l.0 += (tf - tk).as_secs_f64();
+                    l.1 += (te - tf).as_secs_f64();
+                    if W::ON {
+                        let mut ws = wall_sum.lock().unwrap();
+                        let (imp, old) = &mut *ws;
+                        for w in 0..MAX_WALLS {
+                            imp[w] += 0.5 * dt * (old[w] + diag.wall_force[w]);
+                        }
+                        *old = diag.wall_force;
+                    }
+                }
+                let bad = diag.max_overlap.is_nan() || diag.max_overlap > max_ov;
+                if bad || done == budget {
+                    let exit = if bad {
+                        TeamExit::Overlap
+                    } else {
+                        TeamExit::Done
+                    };
+                    return (done, track, exit);
+                }
+            }
+        });
+
+        // every thread ended at the same step for the same reason; the first one's account
+        let (done, track, exit) = results.into_iter().next().expect("a team of one or more");
+        if done % 2 == 1 {
+            std::mem::swap(&mut self.hist, &mut self.hist_next);
+            std::mem::swap(&mut self.whist, &mut self.whist_next);
+        }
+        if done > 0 {
+            self.diag = reduce_outs(&outs);
+        }
+        // a stint that ends inside a step has done that step's first pass, which took the
+        // pending cross pass; otherwise the last step's is pending
+        self.cross_pending = match exit {
+            TeamExit::Outside { .. } => false,
+            TeamExit::Done | TeamExit::Overlap => true,
+        };
+        self.wall_impulse = wall_sum.into_inner().unwrap().0;
+        let (ti, tf) = leader.into_inner().unwrap();
+        self.timers.integrate += ti;
+        self.timers.forces += tf;
+        self.timers.pair_phase += tf;
+        self.nl.moved = track.moved;
+        self.nl.inner_moved = track.inner_moved;
+        self.nl.frame_v = track.frame_v;
+        self.vmax2 = track.vmax2;
+        self.step += done;
+        // step by step, as `step_once` adds it (the same bits)
+        for _ in 0..done {
+            self.time += dt;
+        }
+        Some((done, exit))
+    }
+}
