@@ -406,7 +406,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.nl.build(&mut self.p, &self.domain);
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
-        self.trim();
+        let freed = self.trim();
+        // a large system's build frees tens of megabytes of temporaries
+        if freed > RELEASE_BYTES || self.p.len() >= 1 << 16 {
+            release_free_memory();
+        }
     }
 
     /// Size the per-chunk and per-cross-slot buffers to the current list (after a build or a
@@ -424,15 +428,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// Keep the per-contact buffers at about 1.25 times what they hold: pushes during a sweep
     /// double a buffer that overflows, and a build is a good moment to give the excess back.
-    fn trim(&mut self) {
-        fn fit<X>(v: &mut Vec<X>, want: usize) {
+    /// Returns the bytes given back.
+    fn trim(&mut self) -> usize {
+        fn fit<X>(v: &mut Vec<X>, want: usize) -> usize {
             let want = if want == 0 { 0 } else { want + want / 4 + 16 };
-            if v.capacity() > want {
+            let had = v.capacity();
+            if had > want {
                 v.shrink_to(want);
             } else {
                 v.reserve_exact(want - v.len());
             }
+            had.saturating_sub(v.capacity()) * std::mem::size_of::<X>()
         }
+        let mut freed = 0;
         // nothing is kept for parts a scene does not have (no friction: no histories; no
         // walls: no wall histories)
         let np = if T::FRICTIONAL { self.hist.len() } else { 0 };
@@ -450,14 +458,15 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         for (a, b) in lists.chain(wlists) {
             let want = a.len();
             for l in [a, b] {
-                fit(&mut l.keys, want);
-                fit(&mut l.vals, want);
+                freed += fit(&mut l.keys, want);
+                freed += fit(&mut l.vals, want);
             }
         }
         for c in self.cross.iter_mut() {
             let want = c.len();
-            fit(c, want);
+            freed += fit(c, want);
         }
+        freed
     }
 
     /// Visit every stored history: `pair(i, j, h)` for pair contacts (internal indices, as
@@ -958,6 +967,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.vmax2 = m2;
         self.prune();
         self.evaluate(0.0, 0.0, false);
+        // the set-up's temporaries (input copies, the first build's) are freed by now
+        if self.p.len() >= 1 << 16 {
+            release_free_memory();
+        }
     }
 
     /// The middle of the velocities' range (per component) and the largest squared speed
@@ -1009,7 +1022,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.cross_idx.clear();
         self.cross_idx.resize(self.nl.n_cross(), u32::MAX);
         // the contact lists grow by doubling during the sweeps: give the excess back
-        self.trim();
+        if self.trim() > RELEASE_BYTES {
+            release_free_memory();
+        }
     }
 
     /// Finish a step whose cross-chunk pass and final half-kick were deferred.
@@ -1203,6 +1218,27 @@ pub(crate) struct ChunkOut {
     pub vir: M3,
     pub contacts: usize,
     pub wall_force: [V3; MAX_WALLS],
+}
+
+/// Freed bytes above which a trim of the contact lists returns the heap's free pages.
+const RELEASE_BYTES: usize = 1 << 20;
+
+/// Give the heap's free pages back to the system after a build. A build's temporaries (cell
+/// keys, the permutation, per-chunk pair buffers: ~50 B per particle at its peak) are freed
+/// when it ends, but glibc keeps freed memory resident; at 1e6 particles that was ~7 B per
+/// particle of resident memory over what the engine holds (`benchmarks/NOTES.md`). The
+/// call costs a walk of the free lists, a few milliseconds at 1e6, once per build.
+fn release_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        extern "C" {
+            fn malloc_trim(pad: usize) -> std::ffi::c_int;
+        }
+        // SAFETY: malloc_trim only returns free memory to the system; glibc provides it
+        unsafe {
+            malloc_trim(0);
+        }
+    }
 }
 
 /// The step's diagnostics from the chunks' reports, in chunk order.
