@@ -713,26 +713,32 @@ mod avx {
                 }
             };
             // SAFETY: keys < span <= the lengths (asserted above)
-            let (js, cs) = unsafe {
-                (
-                    ks.map(|q| *pair_j.get_unchecked(q as usize)),
-                    ks.map(|q| *pair_img.get_unchecked(q as usize)),
-                )
-            };
+            let (mut js, mut cs) = ([0u32; 4], [0u8; 4]);
+            for l in 0..4 {
+                // SAFETY: as above
+                unsafe {
+                    js[l] = *pair_j.get_unchecked(ks[l] as usize);
+                    cs[l] = *pair_img.get_unchecked(ks[l] as usize);
+                }
+            }
             // SAFETY: i, j < n (the list is built from 0..n), image codes < 27
-            let rec = unsafe {
-                [0, 1, 2, 3].map(|l| {
+            // (plain loops, not array maps, here and below: a closure does not inherit
+            // the function's AVX2, and left out of line it cost 12 % of the step)
+            let mut rec = [_mm256_setzero_pd(); 4];
+            for l in 0..4 {
+                // SAFETY: as above
+                unsafe {
                     let xi = ld(xr.get_unchecked(is[l] as usize).as_ptr());
                     let xj = ld(xr.get_unchecked(js[l] as usize).as_ptr());
                     let sh = ld(s.shifts.get_unchecked(cs[l] as usize).as_ptr());
                     // (dx, dy, dz, R_i + R_j)
-                    _mm256_blendv_pd(
+                    rec[l] = _mm256_blendv_pd(
                         _mm256_sub_pd(_mm256_sub_pd(xi, xj), sh),
                         _mm256_add_pd(xi, xj),
                         rmask,
-                    )
-                })
-            };
+                    );
+                }
+            }
             // the velocity records of the partners, for pass 2 (at large N they would
             // otherwise come from the last-level cache one contact at a time)
             for &j in &js {
@@ -827,8 +833,10 @@ mod avx {
         while l < n {
             // a short last group repeats its last particle (bits past n dropped below)
             // SAFETY: indices clamped to n - 1 < xr.len()
-            let r =
-                [0, 1, 2, 3].map(|q| unsafe { ld(xr.get_unchecked((l + q).min(n - 1)).as_ptr()) });
+            let mut r = [_mm256_setzero_pd(); 4];
+            for (q, rq) in r.iter_mut().enumerate() {
+                *rq = unsafe { ld(xr.get_unchecked((l + q).min(n - 1)).as_ptr()) };
+            }
             let c = transpose(r[0], r[1], r[2], r[3]);
             let mut t = _mm256_setzero_pd();
             for pl in s.planes {
@@ -865,6 +873,23 @@ mod avx {
     /// Pass 2's gather with AVX2: the (v, 1/m) and (w, R) halves of four particles' records
     /// transposed into lanes.
     ///
+    /// Half `off` (0: v and 1/m, 4: w and R) of the velocity records of four particles,
+    /// transposed into lanes.
+    ///
+    /// # Safety
+    /// AVX2 CPU; every index < kin.len().
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn kin4(kin: &[[f64; 8]], ix: [usize; 4], off: usize) -> [__m256d; 4] {
+        unsafe {
+            let mut r = [_mm256_setzero_pd(); 4];
+            for l in 0..4 {
+                r[l] = ld(kin.get_unchecked(ix[l]).as_ptr().add(off));
+            }
+            transpose(r[0], r[1], r[2], r[3])
+        }
+    }
+
     /// # Safety
     /// AVX2 CPU; `cl(l) <` the number of contacts.
     #[inline]
@@ -876,7 +901,15 @@ mod avx {
         p: &mut PairIn<4>,
     ) {
         unsafe {
-            let r = [0, 1, 2, 3].map(|l| ld(sc.rec.get_unchecked(cl(l)).as_ptr()));
+            let mut r = [_mm256_setzero_pd(); 4];
+            let (mut ci, mut cj) = ([0usize; 4], [0usize; 4]);
+            for l in 0..4 {
+                let q = cl(l);
+                r[l] = ld(sc.rec.get_unchecked(q).as_ptr());
+                let id = sc.ids.get_unchecked(q);
+                ci[l] = id[0] as usize;
+                cj[l] = id[1] as usize;
+            }
             let [dx, dy, dz, rs] = transpose(r[0], r[1], r[2], r[3]);
             // R_i + R_j as pass 1 added them
             p.rs = ln(rs);
@@ -888,35 +921,25 @@ mod avx {
                 _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
                 _mm256_mul_pd(dz, dz),
             ));
-            let ci = [0, 1, 2, 3].map(|l| sc.ids.get_unchecked(cl(l))[0] as usize);
-            let cj = [0, 1, 2, 3].map(|l| sc.ids.get_unchecked(cl(l))[1] as usize);
             let kin = s.kin;
-            let lo = |ix: [usize; 4]| {
-                let r = ix.map(|i| ld(kin.get_unchecked(i).as_ptr()));
-                transpose(r[0], r[1], r[2], r[3])
-            };
-            let hi = |ix: [usize; 4]| {
-                let r = ix.map(|i| ld(kin.get_unchecked(i).as_ptr().add(4)));
-                transpose(r[0], r[1], r[2], r[3])
-            };
-            let [vx, vy, vz, im] = lo(ci);
+            let [vx, vy, vz, im] = kin4(kin, ci, 0);
             p.vi.x = ln(vx);
             p.vi.y = ln(vy);
             p.vi.z = ln(vz);
             p.imi = ln(im);
-            let [vx, vy, vz, im] = lo(cj);
+            let [vx, vy, vz, im] = kin4(kin, cj, 0);
             p.vj.x = ln(vx);
             p.vj.y = ln(vy);
             p.vj.z = ln(vz);
             p.imj = ln(im);
             if T::FRICTIONAL {
                 // spins and radii only matter with friction (torques, surface velocity)
-                let [wx, wy, wz, r] = hi(ci);
+                let [wx, wy, wz, r] = kin4(kin, ci, 4);
                 p.ri = ln(r);
                 p.wi.x = ln(wx);
                 p.wi.y = ln(wy);
                 p.wi.z = ln(wz);
-                let [wx, wy, wz, r] = hi(cj);
+                let [wx, wy, wz, r] = kin4(kin, cj, 4);
                 p.rj = ln(r);
                 p.wj.x = ln(wx);
                 p.wj.y = ln(wy);
