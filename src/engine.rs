@@ -24,6 +24,10 @@
 //!    the list, so any number of threads, and AVX2 or not, gives the same bits;
 //! 5. second half-kick (and the cell's momentum update) where the domain has its own dynamics.
 //!
+//! Inside one `run`, stretches of plain steps that need only steps 1 and 4 run in one team of
+//! threads (`team`: one parallel region, spin barriers between the passes) instead of
+//! forking and joining twice per step; the bits are the same either way.
+//!
 //! Tangential histories are stored per closed contact (`crate::history`), not per listed pair.
 
 use crate::contact::{Form, Friction, Law, LawParams};
