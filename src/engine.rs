@@ -1083,11 +1083,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         let law = &self.law;
         let dom = &self.domain;
-        let g = self.body.g();
-        let planes = self.walls.planes();
-        let wlaw = self.walls.law();
         let nl = &self.nl;
-        let shifts = image_shifts(&dom.h());
         let xr = &self.xr;
         let kin = &self.kin;
         let mass = &self.p.mass;
@@ -1137,23 +1133,16 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .enumerate()
             .collect();
 
-        let shared = crate::forceloop::Shared {
+        let shared = crate::forceloop::Shared::new(
             law,
             dom,
-            planes,
-            wlaw,
-            g,
-            inner: &nl.inner,
-            own_start: &nl.own_start,
-            pair_j: &nl.pair_j,
-            pair_img: &nl.pair_img,
-            shifts,
-            xr,
-            kin,
-            mass,
+            &self.walls,
+            &self.body,
+            nl,
+            (xr, kin, mass),
             dt,
             ch,
-        };
+        );
         let results: Vec<ChunkOut> = pieces
             .into_par_iter()
             .map(|(c, io)| crate::forceloop::chunk::<F, T, D, W, G, STATS, VIR>(&shared, c, io))

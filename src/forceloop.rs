@@ -17,7 +17,7 @@ use crate::domain::Domain;
 use crate::engine::{Body, ChunkOut, PairOut, Plane, Walls, MAX_WALLS};
 use crate::history::{Cursor, HistList};
 use crate::lanes::{Ln, PairIn, V};
-use crate::neighbor::InnerChunk;
+use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
 use crate::V3;
 use std::cell::RefCell;
 
@@ -51,6 +51,39 @@ pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
     pub mass: &'a [f64],
     pub dt: f64,
     pub ch: usize,
+}
+
+impl<'a, F: Form, T: Friction, D: Domain> Shared<'a, F, T, D> {
+    /// What every chunk of one evaluation reads, from the engine's parts.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new<W: Walls<F, T>, G: Body>(
+        law: &'a Law<F, T>,
+        dom: &'a D,
+        walls: &'a W,
+        body: &G,
+        nl: &'a NeighborList,
+        (xr, kin, mass): (&'a [[f64; 4]], &'a [[f64; 8]], &'a [f64]),
+        dt: f64,
+        ch: usize,
+    ) -> Self {
+        Shared {
+            law,
+            dom,
+            planes: walls.planes(),
+            wlaw: walls.law(),
+            g: body.g(),
+            inner: &nl.inner,
+            own_start: &nl.own_start,
+            pair_j: &nl.pair_j,
+            pair_img: &nl.pair_img,
+            shifts: image_shifts(&dom.h()),
+            xr,
+            kin,
+            mass,
+            dt,
+            ch,
+        }
+    }
 }
 
 /// What one chunk writes.

@@ -275,9 +275,8 @@ where
         let (rad, im, ii, mass): (&[f64], &[f64], &[f64], &[f64]) =
             (radius, inv_mass, inv_inertia, mass);
         let (nl, law, dom) = (&self.nl, &self.law, &self.domain);
-        let (planes, wlaw, g) = (self.walls.planes(), self.walls.law(), self.body.g());
+        let (walls, body) = (&self.walls, &self.body);
         let max_ov = self.guards.max_overlap;
-        let shifts = image_shifts(&dom.h());
 
         let threads = rayon::current_num_threads();
         let barrier = Barrier::new(threads);
@@ -375,23 +374,8 @@ where
                     // forces and torques, its own history lists, cross buffer and cross
                     // slots; the records and positions are only read
                     let o = unsafe {
-                        let shared = Shared {
-                            law,
-                            dom,
-                            planes,
-                            wlaw,
-                            g,
-                            inner: &nl.inner,
-                            own_start: &nl.own_start,
-                            pair_j: &nl.pair_j,
-                            pair_img: &nl.pair_img,
-                            shifts,
-                            xr: pxr.slice(0..n),
-                            kin: pkin.slice(0..n),
-                            mass,
-                            dt,
-                            ch,
-                        };
+                        let recs = (pxr.slice(0..n), pkin.slice(0..n), mass);
+                        let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
                         let io = ChunkIo {
                             fo: pf.slice_mut(r.clone()),
                             to: pt.slice_mut(r.clone()),
