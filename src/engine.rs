@@ -190,6 +190,13 @@ pub struct Guards {
     /// Check positions and velocities for NaN/inf every this many steps.
     pub check_every: u64,
 }
+impl Guards {
+    /// Whether an evaluation's largest overlap breaks the guard (a NaN does).
+    pub fn overlap_exceeded(&self, d: &StepDiag) -> bool {
+        d.max_overlap.is_nan() || d.max_overlap > self.max_overlap
+    }
+}
+
 impl Default for Guards {
     fn default() -> Self {
         Guards {
@@ -412,7 +419,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.set_histories(&pairs, &walls);
         let freed = self.trim();
         // a large system's build frees tens of megabytes of temporaries
-        if freed > RELEASE_BYTES || self.p.len() >= 1 << 16 {
+        if freed > RELEASE_BYTES || self.p.len() >= RELEASE_N {
             release_free_memory();
         }
     }
@@ -687,9 +694,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let defer = D::PLAIN_NVE && more && !check_due;
         self.evaluate(dt, kick, defer);
         if W::ON {
-            for (w, imp) in self.wall_impulse.iter_mut().enumerate() {
-                *imp += 0.5 * dt * (wf_old[w] + self.diag.wall_force[w]);
-            }
+            add_wall_impulse(&mut self.wall_impulse, &wf_old, &self.diag.wall_force, dt);
         }
         let t3 = Instant::now();
         if !D::PLAIN_NVE {
@@ -788,10 +793,18 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let h = 0.5 * dt;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
-        let nl = &self.nl;
-        let (cross, cstat, cidx) = (&self.cross, &self.cross_stats, &self.cross_idx);
         let p = &mut self.p;
-        let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
+        let pass = KickPass {
+            nl: &self.nl,
+            cross: &self.cross,
+            cstat: &self.cross_stats,
+            cidx: &self.cross_idx,
+            per: (&p.radius, &p.inv_mass, &p.inv_inertia),
+            pending,
+            h,
+            dt,
+            u,
+        };
         p.x.par_chunks_mut(ch)
             .zip(p.v.par_chunks_mut(ch))
             .zip(p.omega.par_chunks_mut(ch))
@@ -801,31 +814,18 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .map(|(c, ((((((x, v), w), f), t), a), b))| {
-                let r = c * ch..c * ch + x.len();
-                let src = KickSrc {
-                    im: &im[r.clone()],
-                    ii: &ii[r.clone()],
-                    rad: &rad[r.clone()],
-                };
-                // (the cross index exists only while a pass is pending: a restored state
-                // has none until its first prune)
-                let cx =
-                    pending.then(|| CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, h));
-                let pend = cx.as_ref();
-                kick_drift_pack_chunk::<T>(KickChunk {
-                    x,
-                    v,
-                    w,
-                    f,
-                    t,
-                    a,
-                    b,
-                    s: &src,
-                    pend,
-                    h,
-                    dt,
-                    u,
-                })
+                pass.piece::<T>(
+                    c * ch,
+                    KickOut {
+                        x,
+                        v,
+                        w,
+                        f,
+                        t,
+                        a,
+                        b,
+                    },
+                )
             })
             .reduce(|| Drift::EMPTY, Drift::merge)
     }
@@ -876,7 +876,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     fn check_overlap(&self) -> Result<()> {
         let d = &self.diag;
-        if d.max_overlap.is_nan() || d.max_overlap > self.guards.max_overlap {
+        if self.guards.overlap_exceeded(d) {
             let (i, j) = d.max_overlap_at;
             let mut ids = vec![self.p.id[i] as usize];
             if j != usize::MAX {
@@ -972,7 +972,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.prune();
         self.evaluate(0.0, 0.0, false);
         // the set-up's temporaries (input copies, the first build's) are freed by now
-        if self.p.len() >= 1 << 16 {
+        if self.p.len() >= RELEASE_N {
             release_free_memory();
         }
     }
@@ -1215,6 +1215,9 @@ pub(crate) struct ChunkOut {
 
 /// Freed bytes above which a trim of the contact lists returns the heap's free pages.
 const RELEASE_BYTES: usize = 1 << 20;
+/// Particles from which the set-up and every build return the heap's free pages (their
+/// temporaries are tens of megabytes there).
+const RELEASE_N: usize = 1 << 16;
 
 /// Give the heap's free pages back to the system after a build. A build's temporaries (cell
 /// keys, the permutation, per-chunk pair buffers: ~50 B per particle at its peak) are freed
@@ -1231,6 +1234,22 @@ fn release_free_memory() {
         unsafe {
             malloc_trim(0);
         }
+    }
+}
+
+/// One step's impulse on each wall by the trapezoid rule (what velocity Verlet applies to the
+/// particles), from the wall forces at its start and end. (Always inlined: called out of
+/// line from the step team's closure it changed how the force loop was compiled there,
+/// -3 % on the step bench.)
+#[inline(always)]
+fn add_wall_impulse(
+    imp: &mut [V3; MAX_WALLS],
+    old: &[V3; MAX_WALLS],
+    new: &[V3; MAX_WALLS],
+    dt: f64,
+) {
+    for w in 0..MAX_WALLS {
+        imp[w] += 0.5 * dt * (old[w] + new[w]);
     }
 }
 
@@ -1423,6 +1442,78 @@ struct KickSrc<'a> {
     im: &'a [f64],
     ii: &'a [f64],
     rad: &'a [f64],
+}
+
+/// What every piece of the fused half-kick, drift and packing pass reads.
+struct KickPass<'a> {
+    nl: &'a NeighborList,
+    /// The cross buffers, their statistics and the cross index (read only when `pending`).
+    cross: &'a [Vec<PairOut>],
+    cstat: &'a [Vec<[f64; 10]>],
+    cidx: &'a [u32],
+    /// (R, 1/m, 1/I) per particle.
+    per: (&'a [f64], &'a [f64], &'a [f64]),
+    /// The last step's cross pass and final half-kick are still to be done.
+    pending: bool,
+    h: f64,
+    dt: f64,
+    /// The lists' frame velocity (`NeighborList::frame_v`).
+    u: [f64; 3],
+}
+
+/// What one piece of that pass writes (its particles' slices, from particle `start` on).
+struct KickOut<'a> {
+    x: &'a mut [V3],
+    v: &'a mut [V3],
+    w: &'a mut [V3],
+    f: &'a mut [V3],
+    t: &'a mut [V3],
+    a: &'a mut [[f64; 4]],
+    b: &'a mut [[f64; 8]],
+}
+
+impl KickPass<'_> {
+    /// The pass over the particles start..start + o.x.len().
+    #[inline(always)]
+    fn piece<T: Friction>(&self, start: usize, o: KickOut) -> Drift {
+        let r = start..start + o.x.len();
+        let (rad, im, ii) = self.per;
+        let src = KickSrc {
+            im: &im[r.clone()],
+            ii: &ii[r.clone()],
+            rad: &rad[r.clone()],
+        };
+        // (the cross index exists only while a pass is pending: a restored state has none
+        // until its first prune)
+        let cx = self.pending.then(|| {
+            CrossSrc::new(
+                self.nl, self.cross, self.cstat, self.cidx, self.per, r, self.h,
+            )
+        });
+        let KickOut {
+            x,
+            v,
+            w,
+            f,
+            t,
+            a,
+            b,
+        } = o;
+        kick_drift_pack_chunk::<T>(KickChunk {
+            x,
+            v,
+            w,
+            f,
+            t,
+            a,
+            b,
+            s: &src,
+            pend: cx.as_ref(),
+            h: self.h,
+            dt: self.dt,
+            u: self.u,
+        })
+    }
 }
 
 /// One chunk's slices for the fused half-kick, drift and packing pass, and what it reads.

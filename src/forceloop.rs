@@ -903,9 +903,6 @@ mod avx {
         t
     };
 
-    /// Pass 2's gather with AVX2: the (v, 1/m) and (w, R) halves of four particles' records
-    /// transposed into lanes.
-    ///
     /// Half `off` (0: v and 1/m, 4: w and R) of the velocity records of four particles,
     /// transposed into lanes.
     ///
@@ -923,6 +920,9 @@ mod avx {
         }
     }
 
+    /// Pass 2's gather with AVX2: the (v, 1/m) and (w, R) halves of four particles' records
+    /// transposed into lanes.
+    ///
     /// # Safety
     /// AVX2 CPU; `cl(l) <` the number of contacts.
     #[inline]

@@ -196,14 +196,28 @@ impl NeighborList {
     /// Plain NVE: the bound on the displacements since the build reached half the skin.
     #[inline]
     pub fn moved_out(&self) -> bool {
-        2.0 * self.moved >= self.skin
+        self.out_of_skin(self.moved)
     }
 
-    /// Add one step's drift (largest speed relative to `frame_v` times dt, plus its
-    /// rounding) to the displacement bounds of the list and of the inner list.
+    /// Whether a displacement bound `moved` reaches half the skin (a copy of the bound kept
+    /// outside the list, as a step team keeps one per thread, is judged the same way).
+    #[inline]
+    pub fn out_of_skin(&self, moved: f64) -> bool {
+        2.0 * moved >= self.skin
+    }
+
+    /// What one step adds to the displacement bounds: its largest speed relative to
+    /// `frame_v` times dt, plus the rounding of the positions.
+    #[inline]
+    pub fn step_drift(&self, vmax: f64, dt: f64) -> f64 {
+        vmax * dt + self.drift_eps
+    }
+
+    /// Add one step's drift (`step_drift`) to the displacement bounds of the list and of the
+    /// inner list.
     #[inline]
     pub fn add_drift(&mut self, vmax: f64, dt: f64) {
-        let d = vmax * dt + self.drift_eps;
+        let d = self.step_drift(vmax, dt);
         self.moved += d;
         self.inner_moved += d;
     }
@@ -418,7 +432,13 @@ impl NeighborList {
     /// True if the inner list may have lost a pair that is now within contact: some
     /// particle may have moved half the inner skin since the prune.
     pub fn prune_due(&self) -> bool {
-        !self.inner_valid || 2.0 * self.inner_moved >= self.inner_skin
+        self.prune_due_at(self.inner_moved)
+    }
+
+    /// `prune_due` for an inner bound `inner_moved` kept outside the list.
+    #[inline]
+    pub fn prune_due_at(&self, inner_moved: f64) -> bool {
+        !self.inner_valid || 2.0 * inner_moved >= self.inner_skin
     }
 
     /// Keep, per force-loop chunk and in list order, the listed pairs with a gap below

@@ -279,7 +279,7 @@ where
             (radius, inv_mass, inv_inertia, mass);
         let (nl, law, dom) = (&self.nl, &self.law, &self.domain);
         let (walls, body) = (&self.walls, &self.body);
-        let max_ov = self.guards.max_overlap;
+        let guards = &self.guards;
 
         let threads = rayon::current_num_threads();
         let barrier = Barrier::new(threads);
@@ -306,43 +306,41 @@ where
                 // pass 1: the last step's cross pass and final half-kick, this step's
                 // half-kick, drift and records
                 let mut dr = Drift::EMPTY;
-                // SAFETY (the pass): each piece is taken once (the counter), the pieces are
-                // disjoint ranges of the per-particle arrays, and nothing else is written
-                // during the pass; the cross buffers and index are only read
+                // SAFETY (the pass): each piece is claimed once, the pieces are disjoint
+                // ranges of the per-particle arrays, and nothing else is written during the
+                // pass; the cross buffers and index are only read
+                let pass = unsafe {
+                    KickPass {
+                        nl,
+                        cross: pcross.slice(0..nch),
+                        cstat: pcstat.slice(0..nch),
+                        cidx: pcidx.slice(0..ncidx),
+                        per: (rad, im, ii),
+                        pending,
+                        h,
+                        dt,
+                        u: track.frame_v,
+                    }
+                };
                 for k in kick_claims.take(me, 1 + done as usize) {
                     // sub-piece k % KICK_SPLIT of chunk k / KICK_SPLIT
                     let c0 = (k / KICK_SPLIT) * ch;
                     let c1 = (c0 + ch).min(n);
                     let a = (c0 + (k % KICK_SPLIT) * kp).min(c1);
                     let r = a..(a + kp).min(c1);
-                    let src = KickSrc {
-                        im: &im[r.clone()],
-                        ii: &ii[r.clone()],
-                        rad: &rad[r.clone()],
-                    };
-                    let d = unsafe {
-                        let cross = pcross.slice(0..nch);
-                        let cstat = pcstat.slice(0..nch);
-                        let cidx = pcidx.slice(0..ncidx);
-                        let cx = pending.then(|| {
-                            CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r.clone(), h)
-                        });
-                        kick_drift_pack_chunk::<T>(KickChunk {
+                    // SAFETY: as above
+                    let o = unsafe {
+                        KickOut {
                             x: px.slice_mut(r.clone()),
                             v: pv.slice_mut(r.clone()),
                             w: pw.slice_mut(r.clone()),
                             f: pf.slice_mut(r.clone()),
                             t: pt.slice_mut(r.clone()),
                             a: pxr.slice_mut(r.clone()),
-                            b: pkin.slice_mut(r.clone()),
-                            s: &src,
-                            pend: cx.as_ref(),
-                            h,
-                            dt,
-                            u: track.frame_v,
-                        })
+                            b: pkin.slice_mut(r),
+                        }
                     };
-                    dr = Drift::merge(dr, d);
+                    dr = Drift::merge(dr, pass.piece::<T>(a, o));
                 }
                 // SAFETY: slot `me` is this thread's alone during the pass
                 unsafe { *pdrift.0.add(me) = dr };
@@ -354,31 +352,32 @@ where
                 pending = true;
                 // the bounds of `step_once`, on every thread alike
                 track.vmax2 = dr.m2;
-                let dd = dr.m2.sqrt() * dt + nl.drift_eps;
+                let dd = nl.step_drift(dr.m2.sqrt(), dt);
                 track.moved += dd;
                 track.inner_moved += dd;
                 track.frame_v = dr.next_frame();
-                let moved = 2.0 * track.moved >= nl.skin;
+                let moved = nl.out_of_skin(track.moved);
                 let step = step0 + done;
                 if moved
                     || dom.check(step).is_err()
                     || dom.rebuild_due(nl.skin)
-                    || 2.0 * track.inner_moved >= nl.inner_skin
+                    || nl.prune_due_at(track.inner_moved)
                 {
                     return (done, track, TeamExit::Outside { moved });
                 }
                 let tf = Instant::now();
                 // pass 2: forces, chunk by chunk
                 let par = (done % 2) as usize;
+                // SAFETY (the pass): each chunk is claimed once; it writes its own range of
+                // forces and torques, its own history lists, cross buffer and cross slots;
+                // the records are only read
+                let recs = unsafe { (pxr.slice(0..n), pkin.slice(0..n), mass) };
+                let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
                 for c in chunk_claims.take(me, 1 + done as usize) {
                     let r = c * ch..((c + 1) * ch).min(n);
                     let (c0, c1) = (nl.cross_off[c] as usize, nl.cross_off[c + 1] as usize);
-                    // SAFETY (the pass): each chunk is taken once; it writes its own range of
-                    // forces and torques, its own history lists, cross buffer and cross
-                    // slots; the records and positions are only read
+                    // SAFETY: as above
                     let o = unsafe {
-                        let recs = (pxr.slice(0..n), pkin.slice(0..n), mass);
-                        let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
                         let io = ChunkIo {
                             fo: pf.slice_mut(r.clone()),
                             to: pt.slice_mut(r.clone()),
@@ -408,13 +407,11 @@ where
                     if W::ON {
                         let mut ws = wall_sum.lock().unwrap();
                         let (imp, old) = &mut *ws;
-                        for w in 0..MAX_WALLS {
-                            imp[w] += 0.5 * dt * (old[w] + diag.wall_force[w]);
-                        }
+                        add_wall_impulse(imp, old, &diag.wall_force, dt);
                         *old = diag.wall_force;
                     }
                 }
-                let bad = diag.max_overlap.is_nan() || diag.max_overlap > max_ov;
+                let bad = guards.overlap_exceeded(&diag);
                 if bad || done == budget {
                     let exit = if bad {
                         TeamExit::Overlap
