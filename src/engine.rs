@@ -1461,7 +1461,9 @@ struct KickPass<'a> {
     u: [f64; 3],
 }
 
-/// What one piece of that pass writes (its particles' slices, from particle `start` on).
+/// What one piece of that pass writes (its particles' slices, from particle `start` on):
+/// positions, velocities, spins, forces and torques, and the packed (x, R) and velocity
+/// records.
 struct KickOut<'a> {
     x: &'a mut [V3],
     v: &'a mut [V3],
@@ -1490,23 +1492,8 @@ impl KickPass<'_> {
                 self.nl, self.cross, self.cstat, self.cidx, self.per, r, self.h,
             )
         });
-        let KickOut {
-            x,
-            v,
-            w,
-            f,
-            t,
-            a,
-            b,
-        } = o;
         kick_drift_pack_chunk::<T>(KickChunk {
-            x,
-            v,
-            w,
-            f,
-            t,
-            a,
-            b,
+            out: o,
             s: &src,
             pend: cx.as_ref(),
             h: self.h,
@@ -1518,14 +1505,7 @@ impl KickPass<'_> {
 
 /// One chunk's slices for the fused half-kick, drift and packing pass, and what it reads.
 struct KickChunk<'a, 'b> {
-    x: &'a mut [V3],
-    v: &'a mut [V3],
-    w: &'a mut [V3],
-    f: &'a mut [V3],
-    t: &'a mut [V3],
-    /// The packed (x, R) and velocity records it writes.
-    a: &'a mut [[f64; 4]],
-    b: &'a mut [[f64; 8]],
+    out: KickOut<'a>,
     s: &'b KickSrc<'b>,
     /// The last step's deferred cross pass and final half-kick, if any.
     pend: Option<&'b CrossSrc<'b>>,
@@ -1604,7 +1584,7 @@ fn kdp_avx2<T: Friction>(k: KickChunk) -> Drift {
 /// fourth lane zero): the same IEEE operations in the same order, so the same bits.
 #[cfg(target_arch = "x86_64")]
 mod wide {
-    use super::{CrossSrc, Drift, KickChunk, PairOut};
+    use super::{CrossSrc, Drift, KickChunk, KickOut, PairOut};
     use crate::contact::Friction;
     use crate::V3;
     use std::arch::x86_64::*;
@@ -1670,13 +1650,16 @@ mod wide {
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn kdp<T: Friction>(k: KickChunk) -> Drift {
         let KickChunk {
-            x,
-            v,
-            w,
-            f,
-            t,
-            a,
-            b,
+            out:
+                KickOut {
+                    x,
+                    v,
+                    w,
+                    f,
+                    t,
+                    a,
+                    b,
+                },
             s,
             pend,
             h,
@@ -1769,13 +1752,16 @@ mod wide {
 #[inline(always)]
 fn kdp<T: Friction>(k: KickChunk) -> Drift {
     let KickChunk {
-        x,
-        v,
-        w,
-        f,
-        t,
-        a,
-        b,
+        out:
+            KickOut {
+                x,
+                v,
+                w,
+                f,
+                t,
+                a,
+                b,
+            },
         s,
         pend,
         h,
