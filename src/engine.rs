@@ -33,6 +33,7 @@
 use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
+use crate::forceloop::Recs;
 use crate::history::HistList;
 use crate::neighbor::{chunk_size, image_shifts, widen, NeighborList};
 use crate::particles::Particles;
@@ -41,6 +42,11 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 mod team;
+
+/// Default of `Engine::fuse_from`: at 1e6 particles the fused sweep steps 18 % faster (the
+/// records are read from cache, not memory), at 1e5 3 %, at 2e4 (whose state fits the
+/// last-level cache) 9 % slower (`benchmarks/NOTES.md`).
+pub const FUSE_N: usize = 1 << 16;
 
 /// Target lifetime, in steps, of the inner (pruned) pair list: measured on the channel
 /// workload of issue 6 (benchmarks/NOTES.md).
@@ -267,6 +273,14 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Run stretches of plain steps in one team of threads (`team`); the results are the
     /// same bits either way (off: every step forks and joins its passes through rayon).
     pub team: bool,
+    /// Systems of at least this many particles run their team steps as one sweep per step
+    /// (`team`: each chunk packed, then its forces computed while its records are in
+    /// cache); smaller ones in two passes. The same bits either way.
+    pub fuse_from: usize,
+    /// A fused sweep computes a step's forces before it is known whether the step must
+    /// rebuild or prune first (then they are computed again): a step is fused only if it
+    /// would not, were its largest drift speed this factor times the last one's.
+    pub(crate) fuse_margin: f64,
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
@@ -372,6 +386,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             prune_steps: DEFAULT_PRUNE_STEPS,
             vmax2: f64::INFINITY,
             team: true,
+            fuse_from: FUSE_N,
+            fuse_margin: 1.25,
         };
         e.rebuild();
         e.compute_forces_setup();
@@ -412,9 +428,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// each pair's periodic image stays fixed between builds); the contact histories follow
     /// their particles' ids into the new list.
     pub fn rebuild(&mut self) {
+        self.rebuild_with(false);
+    }
+
+    /// `rebuild`; with `carry_kin` the velocity records (`kin`) follow their particles
+    /// (a step whose first pass packed them may have overwritten the forces they came from).
+    fn rebuild_with(&mut self, carry_kin: bool) {
         self.wrap_all();
         let (pairs, walls) = self.carried_histories();
-        self.nl.build(&mut self.p, &self.domain);
+        let perm = self.nl.build(&mut self.p, &self.domain);
+        if let (true, Some(perm)) = (carry_kin, perm) {
+            let old = std::mem::take(&mut self.kin);
+            self.kin = perm.iter().map(|&k| old[k]).collect();
+        }
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
         let freed = self.trim();
@@ -624,7 +650,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                             return r;
                         }
                         team::TeamExit::Outside { moved } => {
-                            self.step_finish(moved, k + 1 < n, Instant::now())?;
+                            self.step_finish(moved, true, k + 1 < n, Instant::now())?;
                             k += 1;
                         }
                     }
@@ -660,28 +686,37 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let t0 = Instant::now();
         // one pass over the particles: (for plain NVE) the half-kick and drift, then the
         // displacement since the last build and the packed records for the pair loop
-        let moved = if D::PLAIN_NVE {
+        let (moved, packed) = if D::PLAIN_NVE {
             let dr = self.kick_drift_pack();
             self.vmax2 = dr.m2;
             self.nl.add_drift(dr.m2.sqrt(), dt);
             self.nl.frame_v = dr.next_frame();
-            self.nl.moved_out()
+            // (an infinite drift: the pass did not pack, see `kick_drift_pack`)
+            (self.nl.moved_out(), dr.m2.is_finite())
         } else {
             self.domain.integrate_initial(&mut self.p, dt);
-            self.pack()
+            (self.pack(), false)
         };
-        self.step_finish(moved, more, t0)
+        self.step_finish(moved, packed, more, t0)
     }
 
     /// The rest of a step after its first pass (`moved`: the list's displacement bound
-    /// reached half the skin; `t0`: when the step began).
-    fn step_finish(&mut self, moved: bool, more: bool, t0: Instant) -> Result<()> {
+    /// reached half the skin; `packed`: the first pass packed the records, which are then
+    /// carried through a rebuild rather than packed again, as the forces they were packed
+    /// from may be gone (a fused team sweep computes the next ones speculatively);
+    /// `t0`: when the step began).
+    fn step_finish(&mut self, moved: bool, packed: bool, more: bool, t0: Instant) -> Result<()> {
         let dt = self.dt;
         self.domain.check(self.step)?;
         let t1 = Instant::now();
         if moved || !self.nl.valid || self.domain.rebuild_due(self.nl.skin) {
-            self.rebuild();
-            self.pack();
+            if packed {
+                self.rebuild_with(true);
+                self.pack_xr();
+            } else {
+                self.rebuild();
+                self.pack();
+            }
         }
         if self.nl.prune_due() {
             self.prune();
@@ -872,6 +907,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             })
             .reduce(|| false, |a, b| a || b);
         moved || !built
+    }
+
+    /// The (x, R) records alone (after a rebuild wrapped the positions; see `step_finish`).
+    fn pack_xr(&mut self) {
+        let p = &self.p;
+        self.xr.resize(p.len(), [0.0; 4]);
+        self.xr
+            .par_iter_mut()
+            .zip(p.x.par_iter().zip(p.radius.par_iter()))
+            .with_min_len(4096)
+            .for_each(|(a, (x, &r))| *a = xr_record(x, r));
     }
 
     fn check_overlap(&self) -> Result<()> {
@@ -1139,7 +1185,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             &self.walls,
             &self.body,
             nl,
-            (xr, kin, mass),
+            (Recs::new(xr), Recs::new(kin), mass),
             dt,
             ch,
         );

@@ -77,6 +77,9 @@ pub struct NeighborList {
     pub cross_slot: Vec<u32>,
     /// The chunk that owns each entry of cross_slot (slots are numbered by chunk).
     pub cross_src: Vec<u16>,
+    /// Per chunk the last chunk its cross pairs reach (itself when it has none): the fused
+    /// team sweep (`crate::engine`) computes a chunk's forces only once these are packed.
+    pub cross_reach: Vec<u32>,
     /// Scratch of `build_cross` (kept to avoid an allocation per prune).
     cross_fill: Vec<u32>,
     /// Plain NVE (`Domain::PLAIN_NVE`): bound on how far any particle has moved since the
@@ -120,6 +123,7 @@ impl NeighborList {
             cross_start: vec![],
             cross_slot: vec![],
             cross_src: vec![],
+            cross_reach: vec![],
             cross_fill: vec![],
             moved: 0.0,
             x_build: vec![],
@@ -231,8 +235,9 @@ impl NeighborList {
     }
 
     /// Rebuild: spatially sort particles (along a Morton curve of cells) and rebuild the pair
-    /// list. The engine carries the contact histories over by particle id.
-    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) {
+    /// list. The engine carries the contact histories over by particle id. Returns the
+    /// permutation applied to the particles (new index -> old), if not the identity.
+    pub fn build<D: Domain>(&mut self, p: &mut Particles, dom: &D) -> Option<Vec<usize>> {
         let n = p.len();
         // 2. cells in fractional coordinates
         let rmax = p.max_radius();
@@ -412,6 +417,7 @@ impl NeighborList {
         self.drift_eps = 4.0 * f64::EPSILON * (1.0 + xmax + self.skin);
         self.builds += 1;
         self.valid = true;
+        (!identity).then_some(perm)
     }
 
     /// Image code of every pair from the positions at the build (`x_build` on a restart).
@@ -508,6 +514,14 @@ impl NeighborList {
             }
         }
         self.cross_fill = fill;
+        let ch = chunk_size(n);
+        self.cross_reach.clear();
+        self.cross_reach.extend(
+            self.inner
+                .iter()
+                .enumerate()
+                .map(|(c, ic)| ic.xj.iter().fold(c, |m, &j| m.max(j as usize / ch)) as u32),
+        );
     }
 }
 

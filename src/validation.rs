@@ -475,7 +475,10 @@ fn team_steps_change_no_bits() {
     // as stepping through rayon, with walls, gravity, builds and prunes inside the run, for
     // one and two threads; and two runs sharing a pool at once (one team at a time: the
     // other steps the usual way) neither deadlock nor change.
-    let run = |team: bool, threads: usize| {
+    // Fused sweeps (`fuse`: the fusing margin) too: with a margin of 0 every step is fused,
+    // so the steps that build or prune first compute their forces twice (the first time
+    // with the lists out of date, and overwriting the forces the records came from).
+    let run = |team: bool, threads: usize, fuse: Option<f64>| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -483,15 +486,23 @@ fn team_steps_change_no_bits() {
         pool.install(|| {
             let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
             s.team = team;
+            if let Some(m) = fuse {
+                s.fuse_from = 0;
+                s.fuse_margin = m;
+            }
             s.run(700).unwrap();
             (walled_state(&s), s.nl.builds, s.nl.prunes)
         })
     };
-    let (want, builds, prunes) = run(false, 2);
+    let (want, builds, prunes) = run(false, 2, None);
     assert!(builds > 1 && prunes > 3, "builds {builds} prunes {prunes}");
     assert!(want.1[..3].iter().any(|&c| c != 0.0), "no wall impulse");
-    assert_eq!(run(true, 2).0, want);
-    assert_eq!(run(true, 1).0, want);
+    assert_eq!(run(true, 2, None).0, want);
+    assert_eq!(run(true, 1, None).0, want);
+    for fuse in [Some(0.0), Some(1.25)] {
+        assert_eq!(run(true, 2, fuse).0, want, "fused {fuse:?}");
+        assert_eq!(run(true, 1, fuse).0, want, "fused {fuse:?}");
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
         .build()
@@ -512,15 +523,18 @@ fn team_steps_change_no_bits() {
 fn team_stops_at_the_same_overlap_error() {
     // The overlap guard trips inside a team's stretch: the same step, message and state as
     // without the team.
-    let mk = |team: bool| {
+    let mk = |team: bool, fused: bool| {
         // gravity strong enough that the wall layers compress over a few hundred steps
         let mut s = walled_gas::<Hooke>(10.0, 29, 0.7, V3::new(-3000.0, 0.0, 0.0));
         s.team = team;
+        if fused {
+            s.fuse_from = 0;
+        }
         s
     };
     // the largest overlap over the first 100 and 300 steps of a reference run; a guard
     // between them trips between steps 100 and 300
-    let mut r = mk(false);
+    let mut r = mk(false, false);
     let mut peak = [0.0f64; 2];
     for k in 0..300 {
         r.run(1).unwrap();
@@ -528,20 +542,21 @@ fn team_stops_at_the_same_overlap_error() {
     }
     assert!(peak[1] > peak[0] * 1.05, "overlaps do not grow: {peak:?}");
     let limit = 0.5 * (peak[0] + peak[1]);
-    let stop = |team: bool| {
-        let mut s = mk(team);
+    let stop = |team: bool, fused: bool| {
+        let mut s = mk(team, fused);
         s.guards.max_overlap = limit;
         let err = s.run(1000).unwrap_err();
         (err.to_string(), walled_state(&s))
     };
-    let (msg, state) = stop(false);
+    let (msg, state) = stop(false, false);
     assert!(msg.contains("overlap"), "{msg}");
     assert!(
         state.2 > 100 && state.2 <= 300,
         "stopped at step {}",
         state.2
     );
-    assert_eq!(stop(true), (msg, state));
+    assert_eq!(stop(true, true), (msg.clone(), state.clone()));
+    assert_eq!(stop(true, false), (msg, state));
 }
 
 /// A walled frictional gas with gravity run with the inner list pruned to last `prune_steps`

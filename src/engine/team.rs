@@ -13,6 +13,17 @@
 //! waiting fell from 12 % to 6 % of the samples, 3.16 -> 3.25e7 particle-steps/s
 //! (`benchmarks/NOTES.md`).
 //!
+//! Large systems (`Engine::fuse_from`, 65 536 particles) fuse the two passes into one sweep
+//! per step: a thread claims a chunk (in descending order), packs it, waits until the later
+//! chunks its cross pairs reach are packed (`NeighborList::cross_reach`; claimed earlier, so
+//! packed or being packed) and computes its forces while its records are still in cache.
+//! At 1e6 particles the records (96 MB) would otherwise come back from memory: 1.17 ->
+//! 1.39e7 particle-steps/s on one thread. The forces are computed before the step knows
+//! whether it must rebuild or prune first; a step that may (judged on the last drift speed
+//! with a margin, `Engine::fuse_margin`) runs the two passes instead, and one misjudged
+//! computes its forces again outside (the packed records carried through a rebuild, as the
+//! forces they were packed from are gone).
+//!
 //! Determinism is unchanged: every piece and chunk computes exactly what it computes
 //! outside the team (a chunk's sums have the order of the list), the displacement bounds are
 //! maxima and minima (the same for any grouping), and every decision to leave the team is
@@ -26,7 +37,7 @@
 //! a run that finds the team taken steps the usual way.
 
 use super::*;
-use crate::forceloop::{ChunkIo, Shared};
+use crate::forceloop::{ChunkIo, Recs, Shared};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, TryLockError};
 
@@ -60,6 +71,22 @@ impl Barrier {
 
     /// Wait for every thread of the team. Release/acquire: what a thread wrote before the
     /// barrier is seen by every thread after it.
+    fn wait_for(&self, ready: impl Fn() -> bool) {
+        let mut spins = 0u32;
+        while !ready() {
+            assert!(
+                !self.poisoned.load(Ordering::Relaxed),
+                "another thread of the step team panicked"
+            );
+            if spins < 4000 {
+                spins += 1;
+                std::hint::spin_loop();
+            } else {
+                std::thread::yield_now();
+            }
+        }
+    }
+
     fn wait(&self) {
         let g = self.generation.load(Ordering::Acquire);
         if self.count.fetch_add(1, Ordering::AcqRel) + 1 == self.n {
@@ -213,6 +240,7 @@ where
             && self.kin.len() == n
             && self.hist.len() == n.div_ceil(chunk_size(n))
             && self.cross_idx.len() == self.nl.n_cross()
+            && self.nl.cross_reach.len() == n.div_ceil(chunk_size(n))
     }
 
     /// Up to `budget` plain steps (each followed by another step of the same run, none with
@@ -287,13 +315,25 @@ where
         let chunk_claims = Claims::new(nch, 1, threads);
         // per thread its drift of the pass, per chunk its report (each written by one thread
         // in a pass, read by all after the barrier)
-        let mut drifts = vec![Drift::EMPTY; threads];
-        let mut outs: Vec<ChunkOut> = (0..nch).map(|_| ChunkOut::default()).collect();
+        // Two sets, by the parity of the step: a fused step has no barrier between reading
+        // one step's and writing the next one's (a thread may start the next sweep while
+        // another still reads), but one between that and writing the step after.
+        let mut drifts = vec![Drift::EMPTY; 2 * threads];
+        let mut outs: Vec<ChunkOut> = (0..2 * nch).map(|_| ChunkOut::default()).collect();
         let (pdrift, pouts) = (Ptr(drifts.as_mut_ptr()), Ptr(outs.as_mut_ptr()));
         // the leader's (thread 0's) account: pass times, wall impulses and the last forces
         let leader: Mutex<(f64, f64)> = Mutex::new((0.0, 0.0));
         let wall_sum: Mutex<([V3; MAX_WALLS], [V3; MAX_WALLS])> =
             Mutex::new((self.wall_impulse, wf0));
+
+        // the fused sweep (large systems): chunks claimed in descending order from one
+        // counter (the p-th fused sweep claims (p-1) nch .. p nch); each chunk's pass number
+        // once packed
+        let fused = n >= self.fuse_from;
+        let margin = self.fuse_margin;
+        let reach: &[u32] = &nl.cross_reach;
+        let next = AtomicUsize::new(0);
+        let packed: Vec<AtomicUsize> = (0..nch).map(|_| AtomicUsize::new(0)).collect();
 
         let results = rayon::broadcast(|ctx| {
             let me = ctx.index();
@@ -301,8 +341,13 @@ where
             let mut track = track0;
             let mut pending = first_pending;
             let mut done = 0u64;
+            let mut last = None;
+            // fused sweeps done (the same count on every thread: they decide alike)
+            let mut fpass = 0usize;
             loop {
                 let tk = Instant::now();
+                let pass_no = 1 + done as usize;
+                let par = (done % 2) as usize;
                 // pass 1: the last step's cross pass and final half-kick, this step's
                 // half-kick, drift and records
                 let mut dr = Drift::EMPTY;
@@ -322,31 +367,108 @@ where
                         u: track.frame_v,
                     }
                 };
-                for k in kick_claims.take(me, 1 + done as usize) {
-                    // sub-piece k % KICK_SPLIT of chunk k / KICK_SPLIT
-                    let c0 = (k / KICK_SPLIT) * ch;
-                    let c1 = (c0 + ch).min(n);
-                    let a = (c0 + (k % KICK_SPLIT) * kp).min(c1);
-                    let r = a..(a + kp).min(c1);
-                    // SAFETY: as above
+                // chunk c's forces (pass 2), its report into outs[c]
+                let force_chunk = |c: usize, shared: &Shared<F, T, D>| {
+                    let r = c * ch..((c + 1) * ch).min(n);
+                    let (c0, c1) = (nl.cross_off[c] as usize, nl.cross_off[c + 1] as usize);
+                    // SAFETY: each chunk is claimed once per pass; it writes its own range of
+                    // forces and torques, its own history lists, cross buffer and slots
                     let o = unsafe {
-                        KickOut {
-                            x: px.slice_mut(r.clone()),
-                            v: pv.slice_mut(r.clone()),
-                            w: pw.slice_mut(r.clone()),
-                            f: pf.slice_mut(r.clone()),
-                            t: pt.slice_mut(r.clone()),
-                            a: pxr.slice_mut(r.clone()),
-                            b: pkin.slice_mut(r),
-                        }
+                        let io = ChunkIo {
+                            fo: pf.slice_mut(r.clone()),
+                            to: pt.slice_mut(r.clone()),
+                            hold: &*phist[par].0.add(c),
+                            hnew: &mut *phist[1 - par].0.add(c),
+                            wold: &*pwhist[par].0.add(c),
+                            wnew: &mut *pwhist[1 - par].0.add(c),
+                            cross: &mut *pcross.0.add(c),
+                            cstat: &mut *pcstat.0.add(c),
+                            cidx: pcidx.slice_mut(c0..c1),
+                            ps: &mut [],
+                        };
+                        crate::forceloop::chunk::<F, T, D, W, G, false, false>(shared, c, io)
                     };
-                    dr = Drift::merge(dr, pass.piece::<T>(a, o));
+                    // SAFETY: chunk c's report is written by the thread that took it
+                    unsafe { *pouts.0.add(par * nch + c) = o };
+                };
+                // fuse this step unless it may end the stint (then the forces of a fused sweep
+                // would be computed for nothing): judged on the last step's drift speed with a
+                // margin (a misjudged step is still right, only slower)
+                let dd = nl.step_drift(margin * track.vmax2.sqrt(), dt);
+                let fuse = fused
+                    && !nl.out_of_skin(track.moved + dd)
+                    && !nl.prune_due_at(track.inner_moved + dd);
+                if fuse {
+                    // SAFETY: a chunk's forces read only the records of the chunks it waited
+                    // for (below), which no thread writes again in the sweep
+                    let recs =
+                        unsafe { (Recs::from_raw(pxr.0, n), Recs::from_raw(pkin.0, n), mass) };
+                    let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
+                    fpass += 1;
+                    let lim = fpass * nch;
+                    loop {
+                        let k = next.load(Ordering::Relaxed);
+                        if k >= lim {
+                            break;
+                        }
+                        if next
+                            .compare_exchange_weak(k, k + 1, Ordering::Relaxed, Ordering::Relaxed)
+                            .is_err()
+                        {
+                            continue;
+                        }
+                        let c = lim - 1 - k;
+                        let r = c * ch..((c + 1) * ch).min(n);
+                        // SAFETY: as above
+                        let o = unsafe {
+                            KickOut {
+                                x: px.slice_mut(r.clone()),
+                                v: pv.slice_mut(r.clone()),
+                                w: pw.slice_mut(r.clone()),
+                                f: pf.slice_mut(r.clone()),
+                                t: pt.slice_mut(r.clone()),
+                                a: pxr.slice_mut(r.clone()),
+                                b: pkin.slice_mut(r.clone()),
+                            }
+                        };
+                        dr = Drift::merge(dr, pass.piece::<T>(r.start, o));
+                        packed[c].store(pass_no, Ordering::Release);
+                        // the chunks whose records its cross pairs read, and whose pending
+                        // pass reads its cross buffer (which its forces overwrite), packed;
+                        // they were claimed before it, so they are packed or being packed
+                        for p in &packed[c + 1..=reach[c] as usize] {
+                            barrier.wait_for(|| p.load(Ordering::Acquire) == pass_no);
+                        }
+                        force_chunk(c, &shared);
+                    }
+                } else {
+                    for k in kick_claims.take(me, pass_no) {
+                        // sub-piece k % KICK_SPLIT of chunk k / KICK_SPLIT
+                        let c0 = (k / KICK_SPLIT) * ch;
+                        let c1 = (c0 + ch).min(n);
+                        let a = (c0 + (k % KICK_SPLIT) * kp).min(c1);
+                        let r = a..(a + kp).min(c1);
+                        // SAFETY: as above
+                        let o = unsafe {
+                            KickOut {
+                                x: px.slice_mut(r.clone()),
+                                v: pv.slice_mut(r.clone()),
+                                w: pw.slice_mut(r.clone()),
+                                f: pf.slice_mut(r.clone()),
+                                t: pt.slice_mut(r.clone()),
+                                a: pxr.slice_mut(r.clone()),
+                                b: pkin.slice_mut(r),
+                            }
+                        };
+                        dr = Drift::merge(dr, pass.piece::<T>(a, o));
+                    }
                 }
-                // SAFETY: slot `me` is this thread's alone during the pass
-                unsafe { *pdrift.0.add(me) = dr };
+                // SAFETY: slot `me` of this parity is this thread's alone during the pass
+                unsafe { *pdrift.0.add(par * threads + me) = dr };
                 barrier.wait();
-                // SAFETY: nobody writes the slots until the next pass (after a barrier)
-                let dr = unsafe { pdrift.slice(0..threads) }
+                // SAFETY: this parity's slots are written again two steps on, after a barrier
+                // every thread passes once done reading them
+                let dr = unsafe { pdrift.slice(par * threads..(par + 1) * threads) }
                     .iter()
                     .fold(Drift::EMPTY, |a, d| Drift::merge(a, *d));
                 pending = true;
@@ -363,47 +485,35 @@ where
                     || dom.rebuild_due(nl.skin)
                     || nl.prune_due_at(track.inner_moved)
                 {
-                    return (done, track, TeamExit::Outside { moved });
+                    // (a fused sweep computed this step's forces with lists now out of
+                    // date: they are computed again outside, from the records)
+                    return (done, track, TeamExit::Outside { moved }, last);
                 }
                 let tf = Instant::now();
-                // pass 2: forces, chunk by chunk
-                let par = (done % 2) as usize;
-                // SAFETY (the pass): each chunk is claimed once; it writes its own range of
-                // forces and torques, its own history lists, cross buffer and cross slots;
-                // the records are only read
-                let recs = unsafe { (pxr.slice(0..n), pkin.slice(0..n), mass) };
-                let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
-                for c in chunk_claims.take(me, 1 + done as usize) {
-                    let r = c * ch..((c + 1) * ch).min(n);
-                    let (c0, c1) = (nl.cross_off[c] as usize, nl.cross_off[c + 1] as usize);
-                    // SAFETY: as above
-                    let o = unsafe {
-                        let io = ChunkIo {
-                            fo: pf.slice_mut(r.clone()),
-                            to: pt.slice_mut(r.clone()),
-                            hold: &*phist[par].0.add(c),
-                            hnew: &mut *phist[1 - par].0.add(c),
-                            wold: &*pwhist[par].0.add(c),
-                            wnew: &mut *pwhist[1 - par].0.add(c),
-                            cross: &mut *pcross.0.add(c),
-                            cstat: &mut *pcstat.0.add(c),
-                            cidx: pcidx.slice_mut(c0..c1),
-                            ps: &mut [],
-                        };
-                        crate::forceloop::chunk::<F, T, D, W, G, false, false>(&shared, c, io)
-                    };
-                    // SAFETY: chunk c's report is written by the thread that took it
-                    unsafe { *pouts.0.add(c) = o };
+                if !fuse {
+                    // pass 2: forces, chunk by chunk
+                    // SAFETY: the records are only read in this pass
+                    let recs =
+                        unsafe { (Recs::from_raw(pxr.0, n), Recs::from_raw(pkin.0, n), mass) };
+                    let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
+                    for c in chunk_claims.take(me, pass_no) {
+                        force_chunk(c, &shared);
+                    }
+                    barrier.wait();
                 }
-                barrier.wait();
                 done += 1;
-                // SAFETY: the reports are read only until the next force pass (two barriers on)
-                let diag = reduce_outs(unsafe { pouts.slice(0..nch) });
+                // SAFETY: as for the drifts
+                let diag = reduce_outs(unsafe { pouts.slice(par * nch..(par + 1) * nch) });
                 if me == 0 {
                     let te = Instant::now();
                     let mut l = leader.lock().unwrap();
-                    l.0 += (tf - tk).as_secs_f64();
-                    l.1 += (te - tf).as_secs_f64();
+                    if fuse {
+                        // (a fused sweep is timed as forces)
+                        l.1 += (te - tk).as_secs_f64();
+                    } else {
+                        l.0 += (tf - tk).as_secs_f64();
+                        l.1 += (te - tf).as_secs_f64();
+                    }
                     if W::ON {
                         let mut ws = wall_sum.lock().unwrap();
                         let (imp, old) = &mut *ws;
@@ -412,26 +522,28 @@ where
                     }
                 }
                 let bad = guards.overlap_exceeded(&diag);
+                last = Some(diag);
                 if bad || done == budget {
                     let exit = if bad {
                         TeamExit::Overlap
                     } else {
                         TeamExit::Done
                     };
-                    return (done, track, exit);
+                    return (done, track, exit, last);
                 }
             }
         });
 
         // every thread ended at the same step for the same reason; the first one's account
-        let (done, track, exit) = results.into_iter().next().expect("a team of one or more");
+        let (done, track, exit, last) = results.into_iter().next().expect("a team of one or more");
         if done % 2 == 1 {
             std::mem::swap(&mut self.hist, &mut self.hist_next);
             std::mem::swap(&mut self.whist, &mut self.whist_next);
         }
-        if done > 0 {
-            self.diag = reduce_outs(&outs);
+        if let Some(d) = last {
+            self.diag = d;
         }
+        drop(outs);
         // a stint that ends inside a step has done that step's first pass, which took the
         // pending cross pass; otherwise the last step's is pending
         self.cross_pending = match exit {
