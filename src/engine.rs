@@ -33,7 +33,6 @@
 use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::forceloop::Recs;
 use crate::history::HistList;
 use crate::neighbor::{chunk_size, image_shifts, widen, NeighborList};
 use crate::particles::Particles;
@@ -1185,7 +1184,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             &self.walls,
             &self.body,
             nl,
-            (Recs::new(xr), Recs::new(kin), mass),
+            (xr, kin, mass),
             dt,
             ch,
         );

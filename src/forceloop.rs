@@ -20,7 +20,6 @@ use crate::lanes::{Ln, PairIn, V};
 use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
 use crate::V3;
 use std::cell::RefCell;
-use std::marker::PhantomData;
 
 /// Particles per block: the block's contacts stay in L1.
 use crate::neighbor::BLOCK;
@@ -46,9 +45,9 @@ pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
     /// Periodic image shifts by image code, padded to 4 doubles.
     pub shifts: [[f64; 4]; 27],
     /// (x, R) per particle.
-    pub xr: Recs<'a, [f64; 4]>,
+    pub xr: &'a [[f64; 4]],
     /// (v, 1/m, w, R) per particle, v and w predicted to the end of the step.
-    pub kin: Recs<'a, [f64; 8]>,
+    pub kin: &'a [[f64; 8]],
     pub mass: &'a [f64],
     pub dt: f64,
     pub ch: usize,
@@ -63,7 +62,7 @@ impl<'a, F: Form, T: Friction, D: Domain> Shared<'a, F, T, D> {
         walls: &'a W,
         body: &G,
         nl: &'a NeighborList,
-        (xr, kin, mass): (Recs<'a, [f64; 4]>, Recs<'a, [f64; 8]>, &'a [f64]),
+        (xr, kin, mass): (&'a [[f64; 4]], &'a [[f64; 8]], &'a [f64]),
         dt: f64,
         ch: usize,
     ) -> Self {
@@ -84,72 +83,6 @@ impl<'a, F: Form, T: Friction, D: Domain> Shared<'a, F, T, D> {
             dt,
             ch,
         }
-    }
-}
-
-/// Per-particle records the force loop reads. Not a slice: in the fused team sweep
-/// (`crate::engine`) one thread packs a chunk's records while another reads those of the
-/// chunks it has waited for, so no reference may span the whole array, only the records
-/// read.
-#[derive(Clone, Copy)]
-pub(crate) struct Recs<'a, R> {
-    ptr: *const R,
-    len: usize,
-    _life: PhantomData<&'a [R]>,
-}
-
-// SAFETY: a shared view of `R`s, like `&[R]` (see `from_raw` for the writers)
-unsafe impl<R: Sync> Send for Recs<'_, R> {}
-unsafe impl<R: Sync> Sync for Recs<'_, R> {}
-
-impl<'a, R> Recs<'a, R> {
-    pub fn new(s: &'a [R]) -> Self {
-        Recs {
-            ptr: s.as_ptr(),
-            len: s.len(),
-            _life: PhantomData,
-        }
-    }
-
-    /// # Safety
-    /// `ptr` points to `len` records alive for `'a`, and no record is written while it is
-    /// read through this (others may be).
-    pub unsafe fn from_raw(ptr: *const R, len: usize) -> Self {
-        Recs {
-            ptr,
-            len,
-            _life: PhantomData,
-        }
-    }
-
-    pub fn as_ptr(&self) -> *const R {
-        self.ptr
-    }
-
-    /// # Safety
-    /// `i < len`.
-    #[inline(always)]
-    pub unsafe fn get_unchecked(&self, i: usize) -> &'a R {
-        debug_assert!(i < self.len);
-        unsafe { &*self.ptr.add(i) }
-    }
-
-    /// Records `r` (within bounds, or a panic).
-    #[inline(always)]
-    pub fn range(&self, r: std::ops::Range<usize>) -> &'a [R] {
-        assert!(r.start <= r.end && r.end <= self.len);
-        // SAFETY: within the records (asserted); read only (`from_raw`)
-        unsafe { std::slice::from_raw_parts(self.ptr.add(r.start), r.end - r.start) }
-    }
-}
-
-impl<R> std::ops::Index<usize> for Recs<'_, R> {
-    type Output = R;
-    #[inline(always)]
-    fn index(&self, i: usize) -> &R {
-        assert!(i < self.len);
-        // SAFETY: within the records (asserted); read only (`from_raw`)
-        unsafe { &*self.ptr.add(i) }
     }
 }
 
@@ -700,7 +633,7 @@ fn wall_contacts<F, T, W, const STATS: bool>(
 #[inline(always)]
 fn wall_mask<F: Form, T: Friction, D>(s: &Shared<F, T, D>, b0: usize, b1: usize) -> u32 {
     let mut m = 0u32;
-    for (l, x) in s.xr.range(b0..b1).iter().enumerate() {
+    for (l, x) in s.xr[b0..b1].iter().enumerate() {
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
         let t = s
             .planes
@@ -797,21 +730,22 @@ mod avx {
             let m = (ke - k).min(4);
             // SAFETY: k + 4 <= ke <= the lists' lengths (asserted) on the fast path;
             // otherwise lanes past the block's pairs repeat its last pair (masked off below)
-            let (is, ks) = unsafe {
+            let (mut is, mut ks) = ([0u32; 4], [0u32; 4]);
+            unsafe {
                 if m == 4 {
-                    (
-                        std::ptr::read_unaligned(own.as_ptr().add(k) as *const [u16; 4])
-                            .map(|o| i0 + o as u32),
-                        std::ptr::read_unaligned(pair_key.as_ptr().add(k) as *const [u32; 4]),
-                    )
+                    let o = std::ptr::read_unaligned(own.as_ptr().add(k) as *const [u16; 4]);
+                    for l in 0..4 {
+                        is[l] = i0 + o[l] as u32;
+                    }
+                    ks = std::ptr::read_unaligned(pair_key.as_ptr().add(k) as *const [u32; 4]);
                 } else {
-                    let kl = |l: usize| k + l.min(m - 1);
-                    (
-                        [0, 1, 2, 3].map(|l| i0 + *own.get_unchecked(kl(l)) as u32),
-                        [0, 1, 2, 3].map(|l| *pair_key.get_unchecked(kl(l))),
-                    )
+                    for l in 0..4 {
+                        let q = k + l.min(m - 1);
+                        is[l] = i0 + *own.get_unchecked(q) as u32;
+                        ks[l] = *pair_key.get_unchecked(q);
+                    }
                 }
-            };
+            }
             // SAFETY: keys < span <= the lengths (asserted above)
             let (mut js, mut cs) = ([0u32; 4], [0u8; 4]);
             for l in 0..4 {
@@ -926,7 +860,7 @@ mod avx {
         b0: usize,
         b1: usize,
     ) -> u32 {
-        let xr = s.xr.range(b0..b1);
+        let xr = &s.xr[b0..b1];
         let n = xr.len();
         let mut m = 0u32;
         let mut l = 0;
@@ -977,7 +911,7 @@ mod avx {
     /// AVX2 CPU; every index < kin.len().
     #[inline]
     #[target_feature(enable = "avx2")]
-    unsafe fn kin4(kin: super::Recs<[f64; 8]>, ix: [usize; 4], off: usize) -> [__m256d; 4] {
+    unsafe fn kin4(kin: &[[f64; 8]], ix: [usize; 4], off: usize) -> [__m256d; 4] {
         unsafe {
             let mut r = [_mm256_setzero_pd(); 4];
             for l in 0..4 {
