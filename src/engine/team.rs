@@ -69,8 +69,7 @@ impl Barrier {
         }
     }
 
-    /// Wait for every thread of the team. Release/acquire: what a thread wrote before the
-    /// barrier is seen by every thread after it.
+    /// Spin (then yield) until `ready()`; panics if another thread of the team panicked.
     fn wait_for(&self, ready: impl Fn() -> bool) {
         let mut spins = 0u32;
         while !ready() {
@@ -87,6 +86,8 @@ impl Barrier {
         }
     }
 
+    /// Wait for every thread of the team. Release/acquire: what a thread wrote before the
+    /// barrier is seen by every thread after it.
     fn wait(&self) {
         let g = self.generation.load(Ordering::Acquire);
         if self.count.fetch_add(1, Ordering::AcqRel) + 1 == self.n {
@@ -94,19 +95,7 @@ impl Barrier {
             self.generation.store(g.wrapping_add(1), Ordering::Release);
             return;
         }
-        let mut spins = 0u32;
-        while self.generation.load(Ordering::Acquire) == g {
-            assert!(
-                !self.poisoned.load(Ordering::Relaxed),
-                "another thread of the step team panicked"
-            );
-            if spins < 4000 {
-                spins += 1;
-                std::hint::spin_loop();
-            } else {
-                std::thread::yield_now();
-            }
-        }
+        self.wait_for(|| self.generation.load(Ordering::Acquire) != g);
     }
 }
 
@@ -367,6 +356,22 @@ where
                         u: track.frame_v,
                     }
                 };
+                // pass 1 over the particles r (a claimed piece)
+                let kick_piece = |r: std::ops::Range<usize>| {
+                    // SAFETY: a claimed piece: no other thread touches its particles in the pass
+                    let o = unsafe {
+                        KickOut {
+                            x: px.slice_mut(r.clone()),
+                            v: pv.slice_mut(r.clone()),
+                            w: pw.slice_mut(r.clone()),
+                            f: pf.slice_mut(r.clone()),
+                            t: pt.slice_mut(r.clone()),
+                            a: pxr.slice_mut(r.clone()),
+                            b: pkin.slice_mut(r.clone()),
+                        }
+                    };
+                    pass.piece::<T>(r.start, o)
+                };
                 // chunk c's forces (pass 2), its report into outs[c]
                 let force_chunk = |c: usize, shared: &Shared<F, T, D>| {
                     let r = c * ch..((c + 1) * ch).min(n);
@@ -422,19 +427,7 @@ where
                         }
                         let c = lim - 1 - k;
                         let r = c * ch..((c + 1) * ch).min(n);
-                        // SAFETY: as above
-                        let o = unsafe {
-                            KickOut {
-                                x: px.slice_mut(r.clone()),
-                                v: pv.slice_mut(r.clone()),
-                                w: pw.slice_mut(r.clone()),
-                                f: pf.slice_mut(r.clone()),
-                                t: pt.slice_mut(r.clone()),
-                                a: pxr.slice_mut(r.clone()),
-                                b: pkin.slice_mut(r.clone()),
-                            }
-                        };
-                        dr = Drift::merge(dr, pass.piece::<T>(r.start, o));
+                        dr = Drift::merge(dr, kick_piece(r.clone()));
                         packed[c].store(pass_no, Ordering::Release);
                         // the chunks whose records its cross pairs read, and whose pending
                         // pass reads its cross buffer (which its forces overwrite), packed;
@@ -451,19 +444,7 @@ where
                         let c1 = (c0 + ch).min(n);
                         let a = (c0 + (k % KICK_SPLIT) * kp).min(c1);
                         let r = a..(a + kp).min(c1);
-                        // SAFETY: as above
-                        let o = unsafe {
-                            KickOut {
-                                x: px.slice_mut(r.clone()),
-                                v: pv.slice_mut(r.clone()),
-                                w: pw.slice_mut(r.clone()),
-                                f: pf.slice_mut(r.clone()),
-                                t: pt.slice_mut(r.clone()),
-                                a: pxr.slice_mut(r.clone()),
-                                b: pkin.slice_mut(r),
-                            }
-                        };
-                        dr = Drift::merge(dr, pass.piece::<T>(a, o));
+                        dr = Drift::merge(dr, kick_piece(r));
                     }
                 }
                 // SAFETY: slot `me` of this parity is this thread's alone during the pass
