@@ -1,7 +1,7 @@
 """granflow against LAMMPS 22Jul2025 from the same initial states (issue 6): step-0 forces,
 short-run statistics, trajectory divergence, a sheared dense packing, and speed.
 
-    python benchmarks/compare_lammps.py [--quick] [--parts forces,run,traj,shear,speed]
+    python benchmarks/compare_lammps.py [--quick] [--parts forces run traj shear speed]
 
 Every check builds one state, writes it as a LAMMPS data file (``granflow.io``), and runs the
 same steps with the same parameters in both codes; LAMMPS is driven by
@@ -661,7 +661,8 @@ PARTS = ("forces", "run", "traj", "shear", "speed")
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small and fast version of every part")
-    ap.add_argument("--parts", default=",".join(PARTS), help=f"comma list of {PARTS}")
+    ap.add_argument("--parts", nargs="+", default=list(PARTS),
+                    help=f"parts to run, comma- or space-separated, of {PARTS}")
     ap.add_argument("--flow-steps", type=int, default=FLOW_STEPS,
                     help="flow steps after the channel's fill and release (cached state)")
     ap.add_argument("--packing-n", type=int, default=None, help="periodic packing size")
@@ -684,7 +685,7 @@ def main(argv: list[str] | None = None) -> None:
     for k, (small, full) in defaults.items():
         if getattr(a, k) is None:
             setattr(a, k, small if q else full)
-    parts = [p.strip() for p in a.parts.split(",") if p.strip()]
+    parts = [p.strip() for arg in a.parts for p in arg.split(",") if p.strip()]
     bad = set(parts) - set(PARTS)
     if bad:
         ap.error(f"unknown parts {sorted(bad)}: allowed {PARTS}")

@@ -180,10 +180,17 @@ pub struct StepDiag {
 /// Wall-clock seconds spent in each part of the step (cheap: a few clock reads per step).
 #[derive(Clone, Debug, Default)]
 pub struct Timers {
+    /// The half-kick/drift/pack pass and the final integration (a fused team sweep, which
+    /// does both passes chunk by chunk, is counted under `forces`).
     pub integrate: f64,
+    /// List builds and prunes.
     pub neighbor: f64,
+    /// The force evaluation.
     pub forces: f64,
+    /// Of `forces`: the pair loop (the chunks) ...
     pub pair_phase: f64,
+    /// ... and the cross-chunk pass with the final half-kick, when not deferred to the next
+    /// step's first pass.
     pub gather_phase: f64,
 }
 
