@@ -42,8 +42,8 @@ use std::time::Instant;
 
 mod team;
 
-/// Default of `Engine::fuse_from`: at 1e6 particles the fused sweep steps 18 % faster (the
-/// records are read from cache, not memory), at 1e5 3 %, at 2e4 (whose state fits the
+/// Default of `Engine::fuse_from`: at 1e6 particles the fused sweep steps 15-20 % faster (the
+/// records are read from cache, not memory), at 1e5 4 %, at 2e4 (whose state fits the
 /// last-level cache) 9 % slower (`benchmarks/NOTES.md`).
 pub const FUSE_N: usize = 1 << 16;
 
