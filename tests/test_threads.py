@@ -64,3 +64,30 @@ def test_simultaneous_simulations_same_bits() -> None:
     for s in sims:
         for u, w in zip(_state(s), want, strict=True):
             assert np.array_equal(u, w)
+
+
+def _large_walled(threads: int) -> gf.Simulation:
+    """A frictional gas of 70 560 particles (past the size from which a team step is one
+    fused sweep, ``FUSE_N`` in ``src/engine.rs``) between walls, with gravity."""
+    nx, ny, nz = 42, 42, 40
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"), -1)
+    x = 0.8 + 1.12 * g.reshape(-1, 3).astype(float)
+    n = len(x)
+    d = np.random.default_rng(7).uniform(0.9, 1.1, n)
+    lx, ly, lz = 1.12 * nx + 0.5, 1.12 * ny, 1.12 * nz
+    box = gf.Box(length=(lx, ly, lz), periodic=(False, True, True))
+    v = gf.maxwell_velocities(n, 1.0, seed=7)
+    law = gf.ContactLaw(kn=1e5, e_n=0.7, mu=0.5)
+    return gf.Simulation(x, d, box, law, velocities=v, walls=[gf.Wall(0, 0.0, 1.0),
+                         gf.Wall(0, lx, -1.0)], wall_law=law, gravity=(-2.0, -1.0, 0.0),
+                         threads=threads)  # fmt: skip
+
+
+def test_fused_sweep_one_and_two_threads_same_bits() -> None:
+    a, b = _large_walled(1), _large_walled(2)
+    assert a.n >= 65536
+    a.run(600, progress=False)
+    b.run(600, progress=False)
+    assert a.diagnostics()["contacts"] > 0
+    for u, w in zip(_state(a), _state(b), strict=True):
+        assert np.array_equal(u, w)
