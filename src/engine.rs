@@ -444,8 +444,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let (pairs, walls) = self.carried_histories();
         let perm = self.nl.build(&mut self.p, &self.domain);
         if let (true, Some(perm)) = (carry_kin, perm) {
-            let old = std::mem::take(&mut self.kin);
-            self.kin = perm.iter().map(|&k| old[k]).collect();
+            crate::particles::permute_vec(&mut self.kin, &perm);
         }
         self.domain.on_rebuild();
         self.set_histories(&pairs, &walls);
@@ -716,11 +715,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.domain.check(self.step)?;
         let t1 = Instant::now();
         if moved || !self.nl.valid || self.domain.rebuild_due(self.nl.skin) {
+            self.rebuild_with(packed);
             if packed {
-                self.rebuild_with(true);
                 self.pack_xr();
             } else {
-                self.rebuild();
                 self.pack();
             }
         }

@@ -473,7 +473,8 @@ impl NeighborList {
 
     /// Number the inner list's cross pairs and index them by second particle.
     fn build_cross(&mut self, n: usize) {
-        let nchunks = n.div_ceil(chunk_size(n));
+        let ch = chunk_size(n);
+        let nchunks = n.div_ceil(ch);
         self.cross_off.clear();
         self.cross_off.reserve(nchunks + 1);
         let mut total = 0u32;
@@ -504,24 +505,20 @@ impl NeighborList {
         let mut fill = std::mem::take(&mut self.cross_fill);
         fill.clear();
         fill.extend_from_slice(&self.cross_start[..n]);
+        self.cross_reach.clear();
         for (c, ic) in self.inner.iter().enumerate() {
             let slots = self.cross_off[c]..;
+            let mut reach = c;
             for (s, &j) in slots.zip(&ic.xj) {
                 let f = &mut fill[j as usize];
                 self.cross_slot[*f as usize] = s;
                 self.cross_src[*f as usize] = c as u16;
                 *f += 1;
+                reach = reach.max(j as usize / ch);
             }
+            self.cross_reach.push(reach as u32);
         }
         self.cross_fill = fill;
-        let ch = chunk_size(n);
-        self.cross_reach.clear();
-        self.cross_reach.extend(
-            self.inner
-                .iter()
-                .enumerate()
-                .map(|(c, ic)| ic.xj.iter().fold(c, |m, &j| m.max(j as usize / ch)) as u32),
-        );
     }
 }
 

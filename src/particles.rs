@@ -118,20 +118,22 @@ impl Particles {
 
     /// Apply a permutation: new[k] = old[perm[k]].
     pub fn permute(&mut self, perm: &[usize]) {
-        fn apply<T: Clone>(v: &mut Vec<T>, perm: &[usize]) {
-            let old = std::mem::take(v);
-            *v = perm.iter().map(|&k| old[k].clone()).collect();
-        }
-        apply(&mut self.x, perm);
-        apply(&mut self.v, perm);
-        apply(&mut self.omega, perm);
-        apply(&mut self.force, perm);
-        apply(&mut self.torque, perm);
-        apply(&mut self.radius, perm);
-        apply(&mut self.mass, perm);
-        apply(&mut self.inv_mass, perm);
-        apply(&mut self.inv_inertia, perm);
-        apply(&mut self.image, perm);
-        apply(&mut self.id, perm);
+        permute_vec(&mut self.x, perm);
+        permute_vec(&mut self.v, perm);
+        permute_vec(&mut self.omega, perm);
+        permute_vec(&mut self.force, perm);
+        permute_vec(&mut self.torque, perm);
+        permute_vec(&mut self.radius, perm);
+        permute_vec(&mut self.mass, perm);
+        permute_vec(&mut self.inv_mass, perm);
+        permute_vec(&mut self.inv_inertia, perm);
+        permute_vec(&mut self.image, perm);
+        permute_vec(&mut self.id, perm);
     }
+}
+
+/// Apply a permutation to one per-particle array: new[k] = old[perm[k]].
+pub fn permute_vec<T: Clone>(v: &mut Vec<T>, perm: &[usize]) {
+    let old = std::mem::take(v);
+    *v = perm.iter().map(|&k| old[k].clone()).collect();
 }

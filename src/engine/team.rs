@@ -204,6 +204,16 @@ struct Track {
     vmax2: f64,
 }
 
+impl Track {
+    /// After a step that adds `dd` to the bounds: (a rebuild is due, a prune is due).
+    fn due_after(&self, nl: &NeighborList, dd: f64) -> (bool, bool) {
+        (
+            nl.out_of_skin(self.moved + dd),
+            nl.prune_due_at(self.inner_moved + dd),
+        )
+    }
+}
+
 impl<F, T, D, W, G> Engine<F, T, D, W, G>
 where
     F: Form,
@@ -303,17 +313,16 @@ where
         let kick_claims = Claims::new(nkp, KICK_SPLIT, threads);
         let chunk_claims = Claims::new(nch, 1, threads);
         // per thread its drift of the pass, per chunk its report (each written by one thread
-        // in a pass, read by all after the barrier)
-        // Two sets, by the parity of the step: a fused step has no barrier between reading
-        // one step's and writing the next one's (a thread may start the next sweep while
-        // another still reads), but one between that and writing the step after.
+        // in a pass, read by all after the barrier); two sets, by the parity of the step: a
+        // fused step has no barrier between reading one step's and writing the next one's (a
+        // thread may start the next sweep while another still reads), but one between that
+        // and writing the step after
         let mut drifts = vec![Drift::EMPTY; 2 * threads];
         let mut outs: Vec<ChunkOut> = (0..2 * nch).map(|_| ChunkOut::default()).collect();
         let (pdrift, pouts) = (Ptr(drifts.as_mut_ptr()), Ptr(outs.as_mut_ptr()));
-        // the leader's (thread 0's) account: pass times, wall impulses and the last forces
+        // the leader's (thread 0's) account: pass times and wall impulses
         let leader: Mutex<(f64, f64)> = Mutex::new((0.0, 0.0));
-        let wall_sum: Mutex<([V3; MAX_WALLS], [V3; MAX_WALLS])> =
-            Mutex::new((self.wall_impulse, wf0));
+        let wall_sum: Mutex<[V3; MAX_WALLS]> = Mutex::new(self.wall_impulse);
 
         // the fused sweep (large systems): chunks claimed in descending order from one
         // counter (the p-th fused sweep claims (p-1) nch .. p nch); each chunk's pass number
@@ -399,10 +408,9 @@ where
                 // fuse this step unless it may end the stint (then the forces of a fused sweep
                 // would be computed for nothing): judged on the last step's drift speed with a
                 // margin (a misjudged step is still right, only slower)
-                let dd = nl.step_drift(margin * track.vmax2.sqrt(), dt);
                 let fuse = fused
-                    && !nl.out_of_skin(track.moved + dd)
-                    && !nl.prune_due_at(track.inner_moved + dd);
+                    && track.due_after(nl, nl.step_drift(margin * track.vmax2.sqrt(), dt))
+                        == (false, false);
                 if fuse {
                     // SAFETY: other threads write records within these slices during the
                     // sweep, but a chunk's forces read only its own and those of the chunks
@@ -459,16 +467,12 @@ where
                 // the bounds of `step_once`, on every thread alike
                 track.vmax2 = dr.m2;
                 let dd = nl.step_drift(dr.m2.sqrt(), dt);
+                let (moved, prune) = track.due_after(nl, dd);
                 track.moved += dd;
                 track.inner_moved += dd;
                 track.frame_v = dr.next_frame();
-                let moved = nl.out_of_skin(track.moved);
                 let step = step0 + done;
-                if moved
-                    || dom.check(step).is_err()
-                    || dom.rebuild_due(nl.skin)
-                    || nl.prune_due_at(track.inner_moved)
-                {
+                if moved || prune || dom.check(step).is_err() || dom.rebuild_due(nl.skin) {
                     // (a fused sweep computed this step's forces with lists now out of
                     // date: they are computed again outside, from the records)
                     return (done, track, TeamExit::Outside { moved }, last);
@@ -498,10 +502,9 @@ where
                         l.1 += (te - tf).as_secs_f64();
                     }
                     if W::ON {
-                        let mut ws = wall_sum.lock().unwrap();
-                        let (imp, old) = &mut *ws;
-                        add_wall_impulse(imp, old, &diag.wall_force, dt);
-                        *old = diag.wall_force;
+                        // from the wall forces of the last step (before the team's first)
+                        let old = last.as_ref().map_or(&wf0, |d: &StepDiag| &d.wall_force);
+                        add_wall_impulse(&mut wall_sum.lock().unwrap(), old, &diag.wall_force, dt);
                     }
                 }
                 let bad = guards.overlap_exceeded(&diag);
@@ -526,14 +529,13 @@ where
         if let Some(d) = last {
             self.diag = d;
         }
-        drop(outs);
         // a stint that ends inside a step has done that step's first pass, which took the
         // pending cross pass; otherwise the last step's is pending
         self.cross_pending = match exit {
             TeamExit::Outside { .. } => false,
             TeamExit::Done | TeamExit::Overlap => true,
         };
-        self.wall_impulse = wall_sum.into_inner().unwrap().0;
+        self.wall_impulse = wall_sum.into_inner().unwrap();
         let (ti, tf) = leader.into_inner().unwrap();
         self.timers.integrate += ti;
         self.timers.forces += tf;
