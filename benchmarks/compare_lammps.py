@@ -591,7 +591,55 @@ def part_shear(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
     diff = tau_c / p_c - tau_l / p_l
     print(f"  tau/p difference {diff:+.3f} = {diff / np.hypot(gf_ratio_se, lmp_ratio_se):+.1f} "
           "combined SE")
+    out["speed"] = _shear_speed(a, core, st, params)
     return out
+
+
+def _shear_speed(a: argparse.Namespace, core: Any, st: dict[str, Any],
+                 params: dict[str, Any]) -> dict[str, Any]:
+    """Speed on the sheared packing, as on the channel: granflow's cell going on from its
+    steady state at 1 and 2 threads, LAMMPS's ``fix deform`` on the packing handed over (serial,
+    2 OpenMP threads, 2 MPI ranks), ``--shear-speed-steps`` each, best of ``--repeat``. Not like
+    for like in granflow's disfavour: the cell integrates the Parrinello-Rahman cell dynamics
+    (virial and kinetic stress every step), LAMMPS a prescribed deformation."""
+    steps = a.shear_speed_steps
+    params = {**params, "thermo_every": steps}
+    params.pop("extra", None)
+
+    def best(fn: Any) -> float:
+        return max(fn() for _ in range(a.repeat))
+
+    def gf_rate(threads: int) -> float:
+        core.threads = threads
+        core.run(1)  # pool and team set-up outside the timing
+        t0 = time.perf_counter()
+        core.run(steps)
+        return core.n * steps / (time.perf_counter() - t0)
+
+    rows = [{"code": "granflow", "mode": f"{t} thread(s)", "rate": best(lambda t=t: gf_rate(t))}
+            for t in (1, 2)]
+    core.threads = 1
+    for mode, threads, label in (("serial", 1, "serial"), ("omp", 2, "2 OpenMP threads"),
+                                 ("mpi", 1, "2 MPI ranks")):
+        def lmp_rate(m: str = mode, t: int = threads) -> float:
+            r = lp.run(st, params, steps, mode=m, threads=t, scene="sheared",
+                       env={"OMP_WAIT_POLICY": a.omp_wait_policy})
+            return float(r["particle_steps_per_s"])
+
+        rows.append({"code": "LAMMPS", "mode": label, "rate": best(lmp_rate)})
+    rate = {(r["code"], r["mode"]): r["rate"] for r in rows}
+    g1, g2 = rate[("granflow", "1 thread(s)")], rate[("granflow", "2 thread(s)")]
+    omp, mpi = rate[("LAMMPS", "2 OpenMP threads")], rate[("LAMMPS", "2 MPI ranks")]
+    ratios = {"gf1/lmp_serial": g1 / rate[("LAMMPS", "serial")], "gf2/lmp_omp2": g2 / omp,
+              "gf2/lmp_mpi2": g2 / mpi, "gf2/best_lmp_2core": g2 / max(omp, mpi),
+              "gf2/gf1": g2 / g1}
+    print(f"\n== speed, sheared packing N = {core.n}, {steps} steps (best of {a.repeat}; "
+          "LAMMPS: Loop time; granflow: run() wall time)")
+    for r in rows:
+        print(f"{r['code']:>9} {r['mode']:>28} {r['rate']:>11.3e} particle-steps/s")
+    for k, v in ratios.items():
+        print(f"{k:>20} {v:6.2f}")
+    return {"steps": steps, "repeat": a.repeat, "rows": rows, "ratios": ratios}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -673,6 +721,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--cell-steps", type=int, default=None, help="granflow cell run to steady flow")
     ap.add_argument("--shear-steps", type=int, default=None, help="steps of the sheared runs")
     ap.add_argument("--speed-steps", type=int, default=None)
+    ap.add_argument("--shear-speed-steps", type=int, default=None,
+                    help="steps of each timed run on the sheared packing")
     ap.add_argument("--repeat", type=int, default=1, help="speed: best of REPEAT runs")
     ap.add_argument("--omp-wait-policy", default="PASSIVE", choices=["PASSIVE", "ACTIVE"],
                     help="LAMMPS OpenMP threads; PASSIVE survives a loaded machine")
@@ -681,7 +731,8 @@ def main(argv: list[str] | None = None) -> None:
     q = a.quick
     defaults = {"packing_n": (2000, 5000), "run_steps": (2000, 5000), "traj_steps": (1000, 3000),
                 "cell_n": (500, 2000), "cell_steps": (60_000, 150_000),
-                "shear_steps": (20_000, 100_000), "speed_steps": (2000, 20_000)}
+                "shear_steps": (20_000, 100_000), "speed_steps": (2000, 20_000),
+                "shear_speed_steps": (5000, 20_000)}
     for k, (small, full) in defaults.items():
         if getattr(a, k) is None:
             setattr(a, k, small if q else full)
