@@ -54,6 +54,12 @@ pub trait Domain: Clone + Send + Sync + 'static {
     fn integrate_final(&mut self, p: &mut Particles, dt: f64, _virial: &M3) {
         nve_final(p, dt);
     }
+    /// A bound on the norm of the velocity gradient L that the last drift applied (zero for a
+    /// static box): a pair's separation then changed by dt (v_i - v_j + L r_ij), so its gap
+    /// closes at most at 2 max |v| + |L| |r_ij| (the inner list's displacement bound).
+    fn affine_rate(&self) -> f64 {
+        0.0
+    }
     /// Whether the cell changed enough since the last neighbour build to force a rebuild.
     fn rebuild_due(&self, _skin: f64) -> bool {
         false

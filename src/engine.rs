@@ -269,9 +269,10 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// The last evaluation left its cross-chunk pass and final half-kick to the next step's
     /// first pass (plain NVE inside `run`; see `step_once`).
     cross_pending: bool,
-    /// Dynamic pruning (plain NVE): the inner list's skin is chosen at each prune so that it
-    /// lasts about this many steps at the current largest speed; 0 turns pruning off (the
-    /// force loop then tests every listed pair). Results do not depend on it.
+    /// Dynamic pruning: the inner list's skin is chosen at each prune so that it lasts about
+    /// this many steps at the current largest speed (and, in a deforming cell, strain rate);
+    /// 0 turns pruning off (the force loop then tests every listed pair). Results do not
+    /// depend on it.
     pub prune_steps: f64,
     /// Largest squared drift velocity of the last step relative to the lists' frame
     /// (`NeighborList::frame_v`).
@@ -700,7 +701,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             (self.nl.moved_out(), dr.m2.is_finite())
         } else {
             self.domain.integrate_initial(&mut self.p, dt);
-            (self.pack(), false)
+            let (moved, m2) = self.pack();
+            // the inner list's bound: a pair's gap closes at most at 2 |v|max + |L| r, and a
+            // pair that reaches contact from beyond the inner skin does so at r <= cut
+            self.vmax2 = m2;
+            let rate = m2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut;
+            self.nl.inner_moved += self.nl.step_drift(rate, dt) + self.affine_eps();
+            (moved, false)
         };
         self.step_finish(moved, packed, more, t0)
     }
@@ -719,7 +726,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             if packed {
                 self.pack_xr();
             } else {
-                self.pack();
+                let _ = self.pack();
             }
         }
         if self.nl.prune_due() {
@@ -872,7 +879,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
     /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m. Returns true if some particle
     /// moved more than half the skin since the last build (the list must be rebuilt).
-    fn pack(&mut self) -> bool {
+    /// Rounding of one drift x' = (1 + dt L) x + dt v of a deforming cell and of its image
+    /// shifts H n, beyond `drift_eps` (zero for a static box).
+    fn affine_eps(&self) -> f64 {
+        if D::PLAIN_NVE {
+            0.0
+        } else {
+            16.0 * f64::EPSILON * (self.domain.h().norm() + self.nl.cut)
+        }
+    }
+
+    /// Pack the step records; returns whether some particle moved half the skin since the
+    /// build (domains that keep `x_build`) and the largest squared speed.
+    fn pack(&mut self) -> (bool, f64) {
         let n = self.p.len();
         let ch = chunk_size(n);
         let hdt = 0.5 * self.dt;
@@ -889,12 +908,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .enumerate()
             .map(|(c, (a, b))| {
                 let mut moved = false;
+                let mut m2 = 0.0f64;
                 for l in 0..a.len() {
                     let i = c * ch + l;
                     let xi = p.x[i];
                     // positions are not wrapped between builds: the plain difference is the
                     // displacement
                     moved |= built && (xi - widen(&xb[i])).norm_squared() > lim;
+                    m2 = m2.max(p.v[i].norm_squared());
                     a[l] = xr_record(&xi, p.radius[i]);
                     b[l] = kin_record(
                         &p.v[i],
@@ -907,10 +928,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         p.radius[i],
                     );
                 }
-                moved
+                (moved, m2)
             })
-            .reduce(|| false, |a, b| a || b);
-        moved || !built
+            .reduce(|| (false, 0.0), |a, b| (a.0 || b.0, a.1.max(b.1)));
+        (moved.0 || !built, moved.1)
     }
 
     /// The (x, R) records alone (after a rebuild wrapped the positions; see `step_finish`).
@@ -1012,7 +1033,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// evaluation, or after the state was set from outside). As LAMMPS's setup, which skips
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
-        self.pack();
+        let _ = self.pack();
         // the lists' frame from the velocities now, so that the first inner list lasts about
         // `prune_steps` steps like the later ones (and its prune trims the contact lists,
         // which grow by doubling while the first contacts are stored)
@@ -1058,8 +1079,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// off).
     fn prune(&mut self) {
         let skin = self.nl.skin;
-        let s_in = if D::PLAIN_NVE && self.prune_steps > 0.0 {
-            let want = 2.0 * self.vmax2.sqrt() * self.dt * self.prune_steps;
+        let s_in = if self.prune_steps > 0.0 {
+            // (as the bound in `step_once`: the affine part is zero for a static box)
+            let rate = self.vmax2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut;
+            let want = 2.0 * rate * self.dt * self.prune_steps;
             // below 1/50 of the skin a prune would keep hardly fewer pairs
             let s = want.max(0.02 * skin);
             // at the outer skin it would keep them all: no pruning

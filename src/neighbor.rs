@@ -103,6 +103,8 @@ pub struct NeighborList {
     pub xb_eps: f64,
     pub builds: u64,
     pub valid: bool,
+    /// Largest centre distance a listed pair had at the last build (2 R_max + skin).
+    pub cut: f64,
 }
 
 impl NeighborList {
@@ -130,6 +132,7 @@ impl NeighborList {
             xb_eps: 0.0,
             builds: 0,
             valid: false,
+            cut: 0.0,
         }
     }
 
@@ -242,6 +245,7 @@ impl NeighborList {
         // 2. cells in fractional coordinates
         let rmax = p.max_radius();
         let cut = 2.0 * rmax + self.skin;
+        self.cut = cut;
         let w = dom.widths();
         let per = dom.periodic();
         let mut nb = [1usize; 3];

@@ -307,6 +307,10 @@ impl Domain for PrCell {
         Ok(())
     }
 
+    fn affine_rate(&self) -> f64 {
+        // the Frobenius norm bounds the operator norm
+        self.l_grad().norm()
+    }
     fn rebuild_due(&self, skin: f64) -> bool {
         // periodic images move with the cell: bound the change of any image shift
         let dh = self.h - self.h_build;

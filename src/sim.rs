@@ -21,6 +21,8 @@ pub trait Simulation: Send + Sync {
     fn dt(&self) -> f64;
     fn contact_time(&self) -> f64;
     fn diag(&self) -> StepDiag;
+    /// Neighbour-list builds and prunes since the start (counters, for benchmarks and tuning).
+    fn list_counts(&self) -> (u64, u64);
     /// The parts this simulation is composed of (e.g. "contact: hooke/coulomb", "walls: 2 planes").
     fn components(&self) -> Vec<String>;
     /// Bytes held by each part (capacity of its arrays).
@@ -251,6 +253,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     }
     fn diag(&self) -> StepDiag {
         self.diag.clone()
+    }
+    fn list_counts(&self) -> (u64, u64) {
+        (self.nl.builds, self.nl.prunes)
     }
     fn components(&self) -> Vec<String> {
         self.component_list()
@@ -508,6 +513,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 self.nl.valid = false;
             }
         }
+        // (not saved: it follows from the radii and the skin)
+        self.nl.cut = 2.0 * self.p.max_radius() + self.nl.skin;
         for (k, c) in r.f64s("walls.impulse")?.chunks_exact(3).enumerate() {
             self.wall_impulse[k] = crate::V3::new(c[0], c[1], c[2]);
         }

@@ -944,3 +944,58 @@ fn cell_min_image_matches_brute_force_at_large_tilt() {
         }
     }
 }
+
+/// A sheared stress-controlled cell: the pruned inner list (its bound counts the cell's strain
+/// rate) gives the same bits as testing every listed pair, and at every checked step the
+/// contacts the engine found are all the pairs in contact (brute force over the minimum
+/// image).
+#[test]
+fn sheared_cell_pruning_changes_no_bits_and_misses_no_contact() {
+    use crate::domain::Domain;
+    use crate::prcell::PrCell;
+    let l = 9.0;
+    let mut p = gas(0.3, l, 17, SizeDist::Uniform(0.8, 1.2));
+    // at rest: the pairs first close by the cell's affine motion alone, which the inner
+    // list's bound must count
+    p.v.iter_mut().for_each(|v| *v = V3::zeros());
+    p.omega.iter_mut().for_each(|w| *w = V3::zeros());
+    let law = LawParams::new(1e4, 0.7, 0.5);
+    // pressure and shear stress well above the gas's: the cell compacts and shears
+    let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
+    let run = |prune: f64| {
+        let mut e: Engine<Hooke, Coulomb, PrCell, NoWalls, NoBody> =
+            Engine::new(p.clone(), law, cell.clone(), NoWalls, NoBody, None, 0.3).unwrap();
+        e.prune_steps = prune;
+        let mut fewer = false;
+        for k in 0..300 {
+            e.run(if k < 200 { 1 } else { 20 }).unwrap();
+            fewer |= e.nl.inner_len() < e.nl.len();
+            let n = e.p.len();
+            let mut brute = 0;
+            for i in 0..n {
+                for j in i + 1..n {
+                    let d = e.domain.delta(&e.p.x[i], &e.p.x[j]).norm();
+                    if d < e.p.radius[i] + e.p.radius[j] {
+                        brute += 1;
+                    }
+                }
+            }
+            assert_eq!(e.diag.contacts, brute, "step {}", e.step);
+        }
+        let mut by_id = vec![[0.0; 6]; e.p.len()];
+        for i in 0..e.p.len() {
+            let (x, v) = (e.p.x[i], e.p.v[i]);
+            by_id[e.p.id[i] as usize] = [x.x, x.y, x.z, v.x, v.y, v.z];
+        }
+        let tilt = e.domain.h()[(0, 1)].abs() + e.domain.h()[(0, 2)].abs();
+        (by_id, fewer, e.nl.prunes, e.diag.contacts, tilt)
+    };
+    let (a, fewer, prunes, contacts, tilt) = run(16.0);
+    let (b, _, _, _, _) = run(0.0);
+    assert!(fewer, "the inner list was never pruned");
+    assert!(
+        prunes > 10 && contacts > 100 && tilt > 0.05,
+        "{prunes} {contacts} {tilt}"
+    );
+    assert!(a == b, "pruning changed the trajectory");
+}

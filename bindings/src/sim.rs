@@ -249,6 +249,9 @@ impl Sim {
         out.set_item("wall_force", wf)?;
         let vir: Vec<f64> = d.virial.iter().cloned().collect();
         out.set_item("virial_colmajor", vir)?;
+        let (builds, prunes) = self.inner.list_counts();
+        out.set_item("list_builds", builds)?;
+        out.set_item("list_prunes", prunes)?;
         Ok(out)
     }
     /// The parts this simulation is composed of.

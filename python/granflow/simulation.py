@@ -275,6 +275,9 @@ class Simulation:
         return dict(self._sim.memory())
 
     def diagnostics(self) -> dict:
+        """The last step's ``max_overlap`` (overlap / pair mean diameter), ``contacts``,
+        ``wall_force`` (per wall, on the particles), ``virial_colmajor`` (sum r_ij (x) f_ij),
+        and the neighbour-list ``list_builds`` and ``list_prunes`` since the start."""
         return self._sim.diagnostics()
 
     def parameters(self) -> dict:
