@@ -10,6 +10,34 @@ use crate::error::{Error, Result};
 use crate::particles::Particles;
 use crate::{M3, V3};
 
+/// The affine maps of a domain's particle updates (see `Domain::begin_step`): a half-kick
+/// v <- v + (dt/2) (f/m - l v - tr v) and a drift x <- a x + dt v (identity maps for a box).
+#[derive(Clone, Copy, Debug)]
+pub struct StepMaps {
+    pub l: M3,
+    pub tr: f64,
+    pub a: M3,
+}
+
+impl Default for StepMaps {
+    fn default() -> Self {
+        StepMaps {
+            l: M3::zeros(),
+            tr: 0.0,
+            a: M3::identity(),
+        }
+    }
+}
+
+impl StepMaps {
+    /// The half-kick of one particle (002 2.10b with the cell's drag; the arithmetic of the
+    /// earlier per-domain loops, so the same bits).
+    #[inline(always)]
+    pub fn kick(&self, v: &V3, f: &V3, im: f64, h2: f64) -> V3 {
+        v + h2 * (f * im - self.l * v - self.tr * v)
+    }
+}
+
 pub trait Domain: Clone + Send + Sync + 'static {
     const NAME: &'static str;
     /// Whether the integrator needs the contact virial sum_pairs r_ij (x) f_ij every step.
@@ -22,8 +50,8 @@ pub trait Domain: Clone + Send + Sync + 'static {
     /// force the total energy can only decrease, which the engine's energy guard checks.
     const CLOSED: bool = false;
     /// Plain velocity Verlet (`nve_initial`/`nve_final`, no domain dynamics): the engine fuses
-    /// the kicks with its own passes over the particles. A domain that overrides
-    /// `integrate_initial`/`integrate_final` must set this to false.
+    /// the kicks with its own passes over the particles. A domain with dynamics of its own
+    /// sets this to false and gives its maps (`begin_step` ...).
     const PLAIN_NVE: bool = true;
     /// The streaming velocity difference L r_ij for a displacement r_ij (only if `STREAMING`).
     #[inline(always)]
@@ -45,15 +73,19 @@ pub trait Domain: Clone + Send + Sync + 'static {
     /// Origin of the cell.
     fn origin(&self) -> V3;
 
-    /// First half of velocity Verlet: half-kick then drift (LAMMPS `nve/sphere` initial_integrate).
-    fn integrate_initial(&mut self, p: &mut Particles, dt: f64) {
-        nve_initial(p, dt);
+    /// A domain with its own dynamics (`PLAIN_NVE` false) moves particles by affine maps the
+    /// engine applies in its own passes (fused with packing, parallel): `begin_step` (the
+    /// domain's first half-step) gives the half-kick's and the drift's maps, `after_drift`
+    /// finishes the domain's drift, `final_kick` gives the second half-kick's map, `end_step`
+    /// takes the contact virial and the kinetic sum sum_i m_i v_i (x) v_i after that kick.
+    fn begin_step(&mut self, _dt: f64) -> StepMaps {
+        StepMaps::default()
     }
-    /// Second half-kick after the forces (LAMMPS `nve/sphere` final_integrate).
-    /// `virial` is sum_pairs r_ij (x) f_ij when `NEEDS_VIRIAL`, zero otherwise.
-    fn integrate_final(&mut self, p: &mut Particles, dt: f64, _virial: &M3) {
-        nve_final(p, dt);
+    fn after_drift(&mut self, _maps: &StepMaps, _p: &mut Particles) {}
+    fn final_kick(&self) -> StepMaps {
+        StepMaps::default()
     }
+    fn end_step(&mut self, _dt: f64, _virial: &M3, _kinetic: &M3) {}
     /// A bound on the norm of the velocity gradient L that the last drift applied (zero for a
     /// static box): a pair's separation then changed by dt (v_i - v_j + L r_ij), so its gap
     /// closes at most at 2 max |v| + |L| |r_ij| (the inner list's displacement bound).
@@ -66,7 +98,7 @@ pub trait Domain: Clone + Send + Sync + 'static {
     }
     /// Called after every neighbour-list rebuild.
     fn on_rebuild(&mut self) {}
-    /// Run-time guard, called once per step after `integrate_initial`: a domain that found its
+    /// Run-time guard, called once per step after the drift: a domain that found its
     /// state unusable (e.g. a deforming cell too thin for the minimum image) reports it here.
     fn check(&self, _step: u64) -> Result<()> {
         Ok(())

@@ -700,8 +700,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             // (an infinite drift: the pass did not pack, see `kick_drift_pack`)
             (self.nl.moved_out(), dr.m2.is_finite())
         } else {
-            self.domain.integrate_initial(&mut self.p, dt);
-            let (moved, m2) = self.pack();
+            let maps = self.domain.begin_step(dt);
+            let (moved, m2) = self.kick_drift_pack_affine(&maps);
+            self.domain.after_drift(&maps, &mut self.p);
             // the inner list's bound: a pair's gap closes at most at 2 |v|max + |L| r, and a
             // pair that reaches contact from beyond the inner skin does so at r <= cut
             self.vmax2 = m2;
@@ -745,7 +746,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let t3 = Instant::now();
         if !D::PLAIN_NVE {
             let vir = self.diag.virial;
-            self.domain.integrate_final(&mut self.p, dt, &vir);
+            let kin = self.final_kick_affine();
+            self.domain.end_step(dt, &vir, &kin);
         }
         let t4 = Instant::now();
         let tm = &mut self.timers;
@@ -879,6 +881,77 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
     /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m. Returns true if some particle
     /// moved more than half the skin since the last build (the list must be rebuilt).
+    /// A domain's first half-kick and drift (`Domain::begin_step` maps) and the packed
+    /// records in one parallel pass (per particle the arithmetic of the domain's own loops,
+    /// then of `pack`). Returns whether some particle moved half the skin since the build,
+    /// and the largest squared speed.
+    fn kick_drift_pack_affine(&mut self, m: &crate::domain::StepMaps) -> (bool, f64) {
+        let n = self.p.len();
+        let ch = chunk_size(n);
+        let (dt, h2) = (self.dt, 0.5 * self.dt);
+        let built = self.nl.x_build.len() == n;
+        let lim = self.nl.moved_limit2();
+        let xb = &self.nl.x_build;
+        self.xr.resize(n, [0.0; 4]);
+        self.kin.resize(n, [0.0; 8]);
+        let p = &mut self.p;
+        let (f, t, im, ii, rad) = (&p.force, &p.torque, &p.inv_mass, &p.inv_inertia, &p.radius);
+        let r =
+            p.x.par_chunks_mut(ch)
+                .zip(p.v.par_chunks_mut(ch))
+                .zip(p.omega.par_chunks_mut(ch))
+                .zip(self.xr.par_chunks_mut(ch))
+                .zip(self.kin.par_chunks_mut(ch))
+                .enumerate()
+                .map(|(c, ((((x, v), w), a), b))| {
+                    let (mut moved, mut m2) = (false, 0.0f64);
+                    for l in 0..x.len() {
+                        let i = c * ch + l;
+                        let vn = m.kick(&v[l], &f[i], im[i], h2);
+                        let wn = w[l] + h2 * ii[i] * t[i];
+                        let xn = m.a * x[l] + dt * vn;
+                        (v[l], w[l], x[l]) = (vn, wn, xn);
+                        // positions are not wrapped between builds: the plain difference is the
+                        // displacement
+                        moved |= built && (xn - widen(&xb[i])).norm_squared() > lim;
+                        m2 = m2.max(vn.norm_squared());
+                        a[l] = xr_record(&xn, rad[i]);
+                        b[l] = kin_record(&vn, &wn, &f[i], &t[i], im[i], ii[i], h2, rad[i]);
+                    }
+                    (moved, m2)
+                })
+                .reduce(|| (false, 0.0), |a, b| (a.0 || b.0, a.1.max(b.1)));
+        (r.0 || !built, r.1)
+    }
+
+    /// A domain's second half-kick (`Domain::final_kick`), in parallel; returns the kinetic
+    /// sum sum_i m_i v_i (x) v_i after it, summed per chunk and then over the chunks in order
+    /// (the same bits for any thread count).
+    fn final_kick_affine(&mut self) -> M3 {
+        let m = self.domain.final_kick();
+        let ch = chunk_size(self.p.len());
+        let h2 = 0.5 * self.dt;
+        let p = &mut self.p;
+        let (f, t, im, ii, mass) = (&p.force, &p.torque, &p.inv_mass, &p.inv_inertia, &p.mass);
+        let sums: Vec<M3> =
+            p.v.par_chunks_mut(ch)
+                .zip(p.omega.par_chunks_mut(ch))
+                .enumerate()
+                .map(|(c, (v, w))| {
+                    let mut k = M3::zeros();
+                    for l in 0..v.len() {
+                        let i = c * ch + l;
+                        let vn = m.kick(&v[l], &f[i], im[i], h2);
+                        v[l] = vn;
+                        w[l] += h2 * ii[i] * t[i];
+                        k += mass[i] * vn * vn.transpose();
+                    }
+                    k
+                })
+                .collect();
+        sums.iter().fold(M3::zeros(), |a, b| a + b)
+    }
+
     /// Rounding of one drift x' = (1 + dt L) x + dt v of a deforming cell and of its image
     /// shifts H n, beyond `drift_eps` (zero for a static box).
     fn affine_eps(&self) -> f64 {

@@ -27,7 +27,7 @@
 //! unchanged, image counters are remapped, the pair list is rebuilt. Contact forces do not
 //! change (checked by a test).
 
-use crate::domain::Domain;
+use crate::domain::{Domain, StepMaps};
 use crate::error::{Error, Result};
 use crate::particles::Particles;
 use crate::{M3, V3};
@@ -121,12 +121,8 @@ impl PrCell {
         s
     }
 
-    fn update_drive(&mut self, p: &Particles, virial: &M3) {
+    fn update_drive(&mut self, virial: &M3, kin: &M3) {
         let v = self.volume();
-        let mut kin = M3::zeros();
-        for i in 0..p.len() {
-            kin += p.mass[i] * p.v[i] * p.v[i].transpose();
-        }
         self.sigma_c = virial / v;
         self.sigma_k = kin / v;
         let sig = self.sigma_c + self.sigma_k;
@@ -240,37 +236,35 @@ impl Domain for PrCell {
         V3::zeros()
     }
 
-    fn integrate_initial(&mut self, p: &mut Particles, dt: f64) {
-        let h2 = 0.5 * dt;
-        self.pg += h2 * self.drive;
+    fn begin_step(&mut self, dt: f64) -> StepMaps {
+        self.pg += (0.5 * dt) * self.drive;
         let l = self.l_grad();
-        let tr = l.trace() / (3.0 * self.n as f64);
-        for i in 0..p.len() {
-            let v = p.v[i];
-            p.v[i] = v + h2 * (p.force[i] * p.inv_mass[i] - l * v - tr * v);
-            p.omega[i] += h2 * p.inv_inertia[i] * p.torque[i];
-        }
         // drift: r += dt (v' + L r); H += dt L H (reduced coordinates move only with v')
-        let a = M3::identity() + dt * l;
-        for i in 0..p.len() {
-            p.x[i] = a * p.x[i] + dt * p.v[i];
+        StepMaps {
+            l,
+            tr: l.trace() / (3.0 * self.n as f64),
+            a: M3::identity() + dt * l,
         }
-        let h = upper(&(a * self.h));
+    }
+
+    fn after_drift(&mut self, m: &StepMaps, p: &mut Particles) {
+        let h = upper(&(m.a * self.h));
         self.set_h(h);
         self.flip(p);
     }
 
-    fn integrate_final(&mut self, p: &mut Particles, dt: f64, virial: &M3) {
-        let h2 = 0.5 * dt;
+    fn final_kick(&self) -> StepMaps {
         let l = self.l_grad();
-        let tr = l.trace() / (3.0 * self.n as f64);
-        for i in 0..p.len() {
-            let v = p.v[i];
-            p.v[i] = v + h2 * (p.force[i] * p.inv_mass[i] - l * v - tr * v);
-            p.omega[i] += h2 * p.inv_inertia[i] * p.torque[i];
+        StepMaps {
+            l,
+            tr: l.trace() / (3.0 * self.n as f64),
+            a: M3::identity(),
         }
-        self.update_drive(p, virial);
-        self.pg += h2 * self.drive;
+    }
+
+    fn end_step(&mut self, dt: f64, virial: &M3, kinetic: &M3) {
+        self.update_drive(virial, kinetic);
+        self.pg += (0.5 * dt) * self.drive;
         self.v_ref = self.v_ref.min(self.volume());
     }
 
