@@ -34,7 +34,7 @@ use crate::contact::{Form, Friction, Law, LawParams};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::history::HistList;
-use crate::neighbor::{chunk_size, image_shifts, widen, NeighborList};
+use crate::neighbor::{chunk_size, image_shifts, NeighborList};
 use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
@@ -629,7 +629,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.p.torque.iter_mut().for_each(|t| *t = V3::zeros());
             // positions are wrapped only by a rebuild: a wrap without one would break the
             // pairs' fixed image codes
-            if self.nl.needs_rebuild(&self.p, &self.domain) {
+            if self.nl.needs_rebuild(&self.p) {
                 self.rebuild();
             }
             self.compute_forces_setup();
@@ -701,14 +701,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             (self.nl.moved_out(), dr.m2.is_finite())
         } else {
             let maps = self.domain.begin_step(dt);
-            let (moved, m2) = self.kick_drift_pack_affine(&maps);
+            let m2 = self.kick_drift_pack_affine(&maps);
             self.domain.after_drift(&maps, &mut self.p);
-            // the inner list's bound: a pair's gap closes at most at 2 |v|max + |L| r, and a
-            // pair that reaches contact from beyond the inner skin does so at r <= cut
+            // the lists' bounds: a pair's gap closes at most at 2 |v|max + |L| r (its image
+            // shift moves with the cell), and a pair that reaches contact from beyond a skin
+            // does so at r <= cut
             self.vmax2 = m2;
             let rate = m2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut;
-            self.nl.inner_moved += self.nl.step_drift(rate, dt) + self.affine_eps();
-            (moved, false)
+            let d = self.nl.step_drift(rate, dt) + self.affine_eps();
+            self.nl.moved += d;
+            self.nl.inner_moved += d;
+            (self.nl.moved_out(), false)
         };
         self.step_finish(moved, packed, more, t0)
     }
@@ -883,45 +886,36 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// moved more than half the skin since the last build (the list must be rebuilt).
     /// A domain's first half-kick and drift (`Domain::begin_step` maps) and the packed
     /// records in one parallel pass (per particle the arithmetic of the domain's own loops,
-    /// then of `pack`). Returns whether some particle moved half the skin since the build,
-    /// and the largest squared speed.
-    fn kick_drift_pack_affine(&mut self, m: &crate::domain::StepMaps) -> (bool, f64) {
+    /// then of `pack`). Returns the largest squared speed.
+    fn kick_drift_pack_affine(&mut self, m: &crate::domain::StepMaps) -> f64 {
         let n = self.p.len();
         let ch = chunk_size(n);
         let (dt, h2) = (self.dt, 0.5 * self.dt);
-        let built = self.nl.x_build.len() == n;
-        let lim = self.nl.moved_limit2();
-        let xb = &self.nl.x_build;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
         let p = &mut self.p;
         let (f, t, im, ii, rad) = (&p.force, &p.torque, &p.inv_mass, &p.inv_inertia, &p.radius);
-        let r =
-            p.x.par_chunks_mut(ch)
-                .zip(p.v.par_chunks_mut(ch))
-                .zip(p.omega.par_chunks_mut(ch))
-                .zip(self.xr.par_chunks_mut(ch))
-                .zip(self.kin.par_chunks_mut(ch))
-                .enumerate()
-                .map(|(c, ((((x, v), w), a), b))| {
-                    let (mut moved, mut m2) = (false, 0.0f64);
-                    for l in 0..x.len() {
-                        let i = c * ch + l;
-                        let vn = m.kick(&v[l], &f[i], im[i], h2);
-                        let wn = w[l] + h2 * ii[i] * t[i];
-                        let xn = m.a * x[l] + dt * vn;
-                        (v[l], w[l], x[l]) = (vn, wn, xn);
-                        // positions are not wrapped between builds: the plain difference is the
-                        // displacement
-                        moved |= built && (xn - widen(&xb[i])).norm_squared() > lim;
-                        m2 = m2.max(vn.norm_squared());
-                        a[l] = xr_record(&xn, rad[i]);
-                        b[l] = kin_record(&vn, &wn, &f[i], &t[i], im[i], ii[i], h2, rad[i]);
-                    }
-                    (moved, m2)
-                })
-                .reduce(|| (false, 0.0), |a, b| (a.0 || b.0, a.1.max(b.1)));
-        (r.0 || !built, r.1)
+        p.x.par_chunks_mut(ch)
+            .zip(p.v.par_chunks_mut(ch))
+            .zip(p.omega.par_chunks_mut(ch))
+            .zip(self.xr.par_chunks_mut(ch))
+            .zip(self.kin.par_chunks_mut(ch))
+            .enumerate()
+            .map(|(c, ((((x, v), w), a), b))| {
+                let mut m2 = 0.0f64;
+                for l in 0..x.len() {
+                    let i = c * ch + l;
+                    let vn = m.kick(&v[l], &f[i], im[i], h2);
+                    let wn = w[l] + h2 * ii[i] * t[i];
+                    let xn = m.a * x[l] + dt * vn;
+                    (v[l], w[l], x[l]) = (vn, wn, xn);
+                    m2 = m2.max(vn.norm_squared());
+                    a[l] = xr_record(&xn, rad[i]);
+                    b[l] = kin_record(&vn, &wn, &f[i], &t[i], im[i], ii[i], h2, rad[i]);
+                }
+                m2
+            })
+            .reduce(|| 0.0, f64::max)
     }
 
     /// A domain's second half-kick (`Domain::final_kick`), in parallel; returns the kinetic
@@ -962,34 +956,24 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
     }
 
-    /// Pack the step records; returns whether some particle moved half the skin since the
-    /// build (domains that keep `x_build`) and the largest squared speed.
-    fn pack(&mut self) -> (bool, f64) {
+    /// Pack the step records; returns the largest squared speed.
+    fn pack(&mut self) -> f64 {
         let n = self.p.len();
         let ch = chunk_size(n);
         let hdt = 0.5 * self.dt;
-        let built = self.nl.x_build.len() == n;
-        let lim = self.nl.moved_limit2();
-        let xb = &self.nl.x_build;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
         let p = &self.p;
-        let moved = self
-            .xr
+        self.xr
             .par_chunks_mut(ch)
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .map(|(c, (a, b))| {
-                let mut moved = false;
                 let mut m2 = 0.0f64;
                 for l in 0..a.len() {
                     let i = c * ch + l;
-                    let xi = p.x[i];
-                    // positions are not wrapped between builds: the plain difference is the
-                    // displacement
-                    moved |= built && (xi - widen(&xb[i])).norm_squared() > lim;
                     m2 = m2.max(p.v[i].norm_squared());
-                    a[l] = xr_record(&xi, p.radius[i]);
+                    a[l] = xr_record(&p.x[i], p.radius[i]);
                     b[l] = kin_record(
                         &p.v[i],
                         &p.omega[i],
@@ -1001,10 +985,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         p.radius[i],
                     );
                 }
-                (moved, m2)
+                m2
             })
-            .reduce(|| (false, 0.0), |a, b| (a.0 || b.0, a.1.max(b.1)));
-        (moved.0 || !built, moved.1)
+            .reduce(|| 0.0, f64::max)
     }
 
     /// The (x, R) records alone (after a rebuild wrapped the positions; see `step_finish`).

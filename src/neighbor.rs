@@ -82,10 +82,10 @@ pub struct NeighborList {
     pub cross_reach: Vec<u32>,
     /// Scratch of `build_cross` (kept to avoid an allocation per prune).
     cross_fill: Vec<u32>,
-    /// Plain NVE (`Domain::PLAIN_NVE`): bound on how far any particle has moved since the
-    /// build relative to a moving frame (the largest drift speed relative to the frame's
-    /// velocity `frame_v`, times dt, summed over the steps); no positions are kept. A domain
-    /// that moves particles itself keeps them instead (`x_build`).
+    /// Bound on how far any particle has moved since the build relative to a moving frame
+    /// (the largest drift speed relative to the frame's velocity `frame_v`, times dt, summed
+    /// over the steps); no positions are kept. In a deforming cell the bound also counts the
+    /// affine part of a pair's relative motion (`Domain::affine_rate`, see `Engine::step_once`).
     ///
     /// Why a frame: a pair's separation changes by Δ_i - Δ_j = (Δ_i - X) - (Δ_j - X) for
     /// any frame displacement X, so 2 max_k |Δ_k - X| bounds it; with X advancing by
@@ -96,11 +96,10 @@ pub struct NeighborList {
     /// The frame velocity of the current step (the middle of the last step's range of
     /// velocities, per component; any value keeps the bound valid).
     pub frame_v: [f64; 3],
-    /// Positions at the last build (the half-skin criterion when not plain NVE).
-    /// (single precision: it only decides when to rebuild, with `xb_eps` as the margin).
+    /// Positions at the last build, only in a list restored from a checkpoint of an earlier
+    /// version (which judged a deforming cell's list by them): its pair images follow from
+    /// them (`set_images`), and it is rebuilt at once.
     pub x_build: Vec<[f32; 3]>,
-    /// Bound on the rounding of `x_build`.
-    pub xb_eps: f64,
     pub builds: u64,
     pub valid: bool,
     /// Largest centre distance a listed pair had at the last build (2 R_max + skin).
@@ -129,7 +128,6 @@ impl NeighborList {
             cross_fill: vec![],
             moved: 0.0,
             x_build: vec![],
-            xb_eps: 0.0,
             builds: 0,
             valid: false,
             cut: 0.0,
@@ -183,21 +181,8 @@ impl NeighborList {
     }
 
     /// True if some particle may have moved half the skin since the last build.
-    pub fn needs_rebuild<D: Domain>(&self, p: &Particles, dom: &D) -> bool {
-        if !self.valid || self.own_start.len() != p.len() + 1 {
-            return true;
-        }
-        if D::PLAIN_NVE {
-            return self.moved_out();
-        }
-        if self.x_build.len() != p.len() {
-            return true;
-        }
-        let lim = self.moved_limit2();
-        p.x.par_iter()
-            .zip(self.x_build.par_iter())
-            .with_min_len(4096)
-            .any(|(x, x0)| dom.delta(x, &widen(x0)).norm_squared() > lim)
+    pub fn needs_rebuild(&self, p: &Particles) -> bool {
+        !self.valid || self.own_start.len() != p.len() + 1 || self.moved_out()
     }
 
     /// Plain NVE: the bound on the displacements since the build reached half the skin.
@@ -227,14 +212,6 @@ impl NeighborList {
         let d = self.step_drift(vmax, dt);
         self.moved += d;
         self.inner_moved += d;
-    }
-
-    /// Squared displacement since the build beyond which the list must be rebuilt: half the
-    /// skin, less the rounding of the stored positions.
-    #[inline]
-    pub fn moved_limit2(&self) -> f64 {
-        let h = (0.5 * self.skin - 2.0 * self.xb_eps).max(0.0);
-        h * h
     }
 
     /// Rebuild: spatially sort particles (along a Morton curve of cells) and rebuild the pair
@@ -406,16 +383,8 @@ impl NeighborList {
 
         let xmax = p.x.iter().map(|x| x.amax()).fold(0.0f64, f64::max);
         self.moved = 0.0;
-        self.x_build.clear();
-        if D::PLAIN_NVE {
-            self.x_build.shrink_to_fit();
-            self.xb_eps = 0.0;
-        } else {
-            self.x_build
-                .extend(p.x.iter().map(|x| [x.x as f32, x.y as f32, x.z as f32]));
-            // |x - (x as f32)| <= 2^-24 |x| per coordinate; sqrt(3) for the vector
-            self.xb_eps = 1.8 * xmax * f64::from(f32::EPSILON);
-        }
+        // (kept only by lists restored from checkpoints of earlier versions)
+        self.x_build = Vec::new();
         // a drift x + v dt rounds by at most half an ulp per coordinate; positions stay
         // within half a skin of where they were wrapped until the next build
         self.drift_eps = 4.0 * f64::EPSILON * (1.0 + xmax + self.skin);

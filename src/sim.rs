@@ -334,7 +334,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         w.u32s("nl.own_start", &nl.own_start);
         let xb: Vec<f64> = nl.x_build.iter().flatten().map(|&c| c as f64).collect();
         w.f64s("nl.x_build", &xb);
-        w.f64s("nl.xb_eps", &[nl.xb_eps]);
+        // (the rounding of x_build in earlier versions; kept for their readers)
+        w.f64s("nl.xb_eps", &[0.0]);
         w.u32s(
             "nl.pair_img",
             &nl.pair_img.iter().map(|&c| c as u32).collect::<Vec<_>>(),
@@ -453,7 +454,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .chunks_exact(3)
             .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
             .collect();
-        nl.xb_eps = r.f64s("nl.xb_eps")?.first().copied().unwrap_or(0.0);
         let meta = r.u64s("nl.meta")?;
         nl.builds = meta[0];
         nl.valid = meta[1] != 0;
@@ -509,9 +509,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 .unwrap_or_else(crate::M3::zeros);
             let xb: Vec<crate::V3> = self.nl.x_build.iter().map(crate::neighbor::widen).collect();
             self.nl.set_images(&xb, &self.domain, &hinv);
-            if D::PLAIN_NVE {
-                self.nl.valid = false;
-            }
+            self.nl.valid = false;
+        }
+        if !self.nl.x_build.is_empty() {
+            // a deforming cell's list from an earlier version, judged by these positions: its
+            // displacement bound was not kept, so it is rebuilt
+            self.nl.valid = false;
         }
         // (not saved: it follows from the radii and the skin)
         self.nl.cut = 2.0 * self.p.max_radius() + self.nl.skin;
