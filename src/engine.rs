@@ -277,6 +277,8 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Largest squared drift velocity of the last step relative to the lists' frame
     /// (`NeighborList::frame_v`).
     vmax2: f64,
+    /// A deforming cell's kinetic sum sum_i m_i v_i (x) v_i after the last final half-kick.
+    kin_sum: M3,
     /// Run stretches of plain steps in one team of threads (`team`); the results are the
     /// same bits either way (off: every step forks and joins its passes through rayon).
     pub team: bool,
@@ -392,6 +394,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross_pending: false,
             prune_steps: DEFAULT_PRUNE_STEPS,
             vmax2: f64::INFINITY,
+            kin_sum: M3::zeros(),
             team: true,
             fuse_from: FUSE_N,
             fuse_margin: 1.25,
@@ -738,8 +741,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         let t2 = Instant::now();
         let wf_old = self.diag.wall_force;
-        // plain NVE: the final half-kick rides on the force loop's last pass
-        let kick = if D::PLAIN_NVE { 0.5 * dt } else { 0.0 };
+        // the final half-kick rides on the force loop's last pass
+        let kick = 0.5 * dt;
         let check_due = (self.step + 1).is_multiple_of(self.guards.check_every);
         let defer = D::PLAIN_NVE && more && !check_due;
         self.evaluate(dt, kick, defer);
@@ -748,8 +751,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         let t3 = Instant::now();
         if !D::PLAIN_NVE {
-            let vir = self.diag.virial;
-            let kin = self.final_kick_affine();
+            let (vir, kin) = (self.diag.virial, self.kin_sum);
             self.domain.end_step(dt, &vir, &kin);
         }
         let t4 = Instant::now();
@@ -916,34 +918,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 m2
             })
             .reduce(|| 0.0, f64::max)
-    }
-
-    /// A domain's second half-kick (`Domain::final_kick`), in parallel; returns the kinetic
-    /// sum sum_i m_i v_i (x) v_i after it, summed per chunk and then over the chunks in order
-    /// (the same bits for any thread count).
-    fn final_kick_affine(&mut self) -> M3 {
-        let m = self.domain.final_kick();
-        let ch = chunk_size(self.p.len());
-        let h2 = 0.5 * self.dt;
-        let p = &mut self.p;
-        let (f, t, im, ii, mass) = (&p.force, &p.torque, &p.inv_mass, &p.inv_inertia, &p.mass);
-        let sums: Vec<M3> =
-            p.v.par_chunks_mut(ch)
-                .zip(p.omega.par_chunks_mut(ch))
-                .enumerate()
-                .map(|(c, (v, w))| {
-                    let mut k = M3::zeros();
-                    for l in 0..v.len() {
-                        let i = c * ch + l;
-                        let vn = m.kick(&v[l], &f[i], im[i], h2);
-                        v[l] = vn;
-                        w[l] += h2 * ii[i] * t[i];
-                        k += mass[i] * vn * vn.transpose();
-                    }
-                    k
-                })
-                .collect();
-        sums.iter().fold(M3::zeros(), |a, b| a + b)
     }
 
     /// Rounding of one drift x' = (1 + dt L) x + dt v of a deforming cell and of its image
@@ -1283,6 +1257,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.diag = reduce_outs(&results);
         if defer && kick > 0.0 && !STATS {
             self.cross_pending = true;
+        } else if !D::PLAIN_NVE && kick > 0.0 {
+            self.kin_sum = self.cross_pass_affine::<STATS>(kick);
         } else {
             self.cross_pass::<STATS>(kick);
         }
@@ -1291,6 +1267,52 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let te = Instant::now();
         self.timers.pair_phase += (tp - tstart).as_secs_f64();
         self.timers.gather_phase += (te - tp).as_secs_f64();
+    }
+
+    /// Phase 2 of a deforming cell's step: the cross pairs as `cross_pass`, then the cell's
+    /// final half-kick (`Domain::final_kick`, `kick` = dt/2) of each particle once its forces
+    /// are complete. Returns the kinetic sum sum_i m_i v_i (x) v_i after the kick, summed per
+    /// chunk and then over the chunks in order (the same bits for any thread count).
+    fn cross_pass_affine<const STATS: bool>(&mut self, kick: f64) -> M3 {
+        let m = self.domain.final_kick();
+        let nl = &self.nl;
+        let n = self.p.len();
+        let ch = chunk_size(n);
+        let nchunks = n.div_ceil(ch);
+        let (cross, cstat, cidx) = (&self.cross, &self.cross_stats, &self.cross_idx);
+        let mut ps_pieces = stat_pieces(&mut self.pstats, STATS, ch, nchunks);
+        let p = &mut self.p;
+        let (rad, im, ii, mass) = (&p.radius, &p.inv_mass, &p.inv_inertia, &p.mass);
+        let sums: Vec<M3> = p
+            .force
+            .par_chunks_mut(ch)
+            .zip(p.torque.par_chunks_mut(ch))
+            .zip(p.v.par_chunks_mut(ch))
+            .zip(p.omega.par_chunks_mut(ch))
+            .zip(ps_pieces.par_drain(..))
+            .enumerate()
+            .map(|(c, ((((fo, to), vo), wo), ps))| {
+                let r = c * ch..c * ch + fo.len();
+                let s = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, kick);
+                assert!(to.len() == fo.len() && vo.len() == fo.len() && wo.len() == fo.len());
+                assert!(!STATS || ps.len() == fo.len());
+                let mut k = M3::zeros();
+                for l in 0..fo.len() {
+                    let i = c * ch + l;
+                    let (mut f, mut t) = (fo[l], to[l]);
+                    // SAFETY: l < the chunk's length, that of every per-particle slice of `s`
+                    // and of `ps` with STATS (asserted above), and s.cs has one more
+                    unsafe { cross_sum::<STATS, T>(l, &mut f, &mut t, ps, &s) };
+                    (fo[l], to[l]) = (f, t);
+                    let vn = m.kick(&vo[l], &f, im[i], kick);
+                    vo[l] = vn;
+                    wo[l] += kick * ii[i] * t;
+                    k += mass[i] * vn * vn.transpose();
+                }
+                k
+            })
+            .collect();
+        sums.iter().fold(M3::zeros(), |a, b| a + b)
     }
 
     /// Phase 2: cross pairs in contact onto their second particles, in list order; for a
