@@ -892,7 +892,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     fn kick_drift_pack_affine(&mut self, m: &crate::domain::StepMaps) -> f64 {
         let n = self.p.len();
         let ch = chunk_size(n);
-        let (dt, h2) = (self.dt, 0.5 * self.dt);
+        let dt = self.dt;
         self.xr.resize(n, [0.0; 4]);
         self.kin.resize(n, [0.0; 8]);
         let p = &mut self.p;
@@ -904,18 +904,25 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
             .map(|(c, ((((x, v), w), a), b))| {
-                let mut m2 = 0.0f64;
-                for l in 0..x.len() {
-                    let i = c * ch + l;
-                    let vn = m.kick(&v[l], &f[i], im[i], h2);
-                    let wn = w[l] + h2 * ii[i] * t[i];
-                    let xn = m.a * x[l] + dt * vn;
-                    (v[l], w[l], x[l]) = (vn, wn, xn);
-                    m2 = m2.max(vn.norm_squared());
-                    a[l] = xr_record(&xn, rad[i]);
-                    b[l] = kin_record(&vn, &wn, &f[i], &t[i], im[i], ii[i], h2, rad[i]);
+                let r = c * ch..c * ch + x.len();
+                let k = AffineKick {
+                    out: (x, v, w, a, b),
+                    src: (
+                        &f[r.clone()],
+                        &t[r.clone()],
+                        &im[r.clone()],
+                        &ii[r.clone()],
+                        &rad[r],
+                    ),
+                    m,
+                    dt,
+                };
+                #[cfg(target_arch = "x86_64")]
+                if crate::lanes::wide() {
+                    // SAFETY: `wide` checked that the CPU has AVX2
+                    return unsafe { affine_kick_pack_avx2(k) };
                 }
-                m2
+                affine_kick_pack(k)
             })
             .reduce(|| 0.0, f64::max)
     }
@@ -1293,23 +1300,21 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .enumerate()
             .map(|(c, ((((fo, to), vo), wo), ps))| {
                 let r = c * ch..c * ch + fo.len();
-                let s = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, kick);
-                assert!(to.len() == fo.len() && vo.len() == fo.len() && wo.len() == fo.len());
-                assert!(!STATS || ps.len() == fo.len());
-                let mut k = M3::zeros();
-                for l in 0..fo.len() {
-                    let i = c * ch + l;
-                    let (mut f, mut t) = (fo[l], to[l]);
-                    // SAFETY: l < the chunk's length, that of every per-particle slice of `s`
-                    // and of `ps` with STATS (asserted above), and s.cs has one more
-                    unsafe { cross_sum::<STATS, T>(l, &mut f, &mut t, ps, &s) };
-                    (fo[l], to[l]) = (f, t);
-                    let vn = m.kick(&vo[l], &f, im[i], kick);
-                    vo[l] = vn;
-                    wo[l] += kick * ii[i] * t;
-                    k += mass[i] * vn * vn.transpose();
+                let s = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r.clone(), kick);
+                let k = CrossChunk {
+                    fo,
+                    to,
+                    vo,
+                    wo,
+                    ps,
+                    s: &s,
+                };
+                #[cfg(target_arch = "x86_64")]
+                if crate::lanes::wide() {
+                    // SAFETY: `wide` checked that the CPU has AVX2
+                    return unsafe { cross_kick_affine_avx2::<STATS, T>(k, &m, &mass[r]) };
                 }
-                k
+                cross_kick_affine::<STATS, T>(k, &m, &mass[r])
             })
             .collect();
         sums.iter().fold(M3::zeros(), |a, b| a + b)
@@ -1968,6 +1973,103 @@ fn kdp<T: Friction>(k: KickChunk) -> Drift {
     }
     dr.m2 = vm;
     dr
+}
+
+/// One chunk's slices for a deforming cell's first half-kick, drift and packing: (x, v, w,
+/// (x, R) records, velocity records) written, (f, t, 1/m, 1/I, R) read.
+#[allow(clippy::type_complexity)]
+struct AffineKick<'a, 'b> {
+    out: (
+        &'a mut [V3],
+        &'a mut [V3],
+        &'a mut [V3],
+        &'a mut [[f64; 4]],
+        &'a mut [[f64; 8]],
+    ),
+    src: (&'b [V3], &'b [V3], &'b [f64], &'b [f64], &'b [f64]),
+    m: &'b crate::domain::StepMaps,
+    dt: f64,
+}
+
+/// `affine_kick_pack` compiled for AVX2 (the same IEEE operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn affine_kick_pack_avx2(k: AffineKick) -> f64 {
+    affine_kick_pack(k)
+}
+
+/// The loop of `Engine::kick_drift_pack_affine` over one chunk; returns the largest squared
+/// speed. (A plain function, not a closure, so that the AVX2 twin inlines it.)
+#[inline(always)]
+fn affine_kick_pack(k: AffineKick) -> f64 {
+    let AffineKick {
+        out: (x, v, w, a, b),
+        src: (f, t, im, ii, rad),
+        m,
+        dt,
+    } = k;
+    let h2 = 0.5 * dt;
+    let n = x.len();
+    // equal lengths let the compiler drop the bounds checks
+    let (v, w, a, b) = (&mut v[..n], &mut w[..n], &mut a[..n], &mut b[..n]);
+    let (f, t, im, ii, rad) = (&f[..n], &t[..n], &im[..n], &ii[..n], &rad[..n]);
+    let mut m2 = 0.0f64;
+    for l in 0..n {
+        let vn = m.kick(&v[l], &f[l], im[l], h2);
+        let wn = w[l] + h2 * ii[l] * t[l];
+        let xn = m.a * x[l] + dt * vn;
+        (v[l], w[l], x[l]) = (vn, wn, xn);
+        m2 = m2.max(vn.norm_squared());
+        a[l] = xr_record(&xn, rad[l]);
+        b[l] = kin_record(&vn, &wn, &f[l], &t[l], im[l], ii[l], h2, rad[l]);
+    }
+    m2
+}
+
+/// `cross_kick_affine` compiled for AVX2 (the same IEEE operations: the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn cross_kick_affine_avx2<const STATS: bool, T: Friction>(
+    k: CrossChunk,
+    m: &crate::domain::StepMaps,
+    mass: &[f64],
+) -> M3 {
+    cross_kick_affine::<STATS, T>(k, m, mass)
+}
+
+/// The loop of `Engine::cross_pass_affine` over one chunk (`s.kick` = dt/2): the cross pairs,
+/// the cell's final half-kick and the chunk's kinetic sum.
+#[inline(always)]
+fn cross_kick_affine<const STATS: bool, T: Friction>(
+    k: CrossChunk,
+    m: &crate::domain::StepMaps,
+    mass: &[f64],
+) -> M3 {
+    let CrossChunk {
+        fo,
+        to,
+        vo,
+        wo,
+        ps,
+        s,
+    } = k;
+    let n = fo.len();
+    assert!(to.len() == n && vo.len() == n && wo.len() == n && s.cs.len() == n + 1);
+    assert!(s.rad.len() == n && s.im.len() == n && s.ii.len() == n && mass.len() == n);
+    assert!(!STATS || ps.len() == n);
+    let h2 = s.kick;
+    let mut kin = M3::zeros();
+    for l in 0..n {
+        let (mut f, mut t) = (fo[l], to[l]);
+        // SAFETY: l < n, the length of every per-particle slice (asserted above)
+        unsafe { cross_sum::<STATS, T>(l, &mut f, &mut t, ps, s) };
+        (fo[l], to[l]) = (f, t);
+        let vn = m.kick(&vo[l], &f, s.im[l], h2);
+        vo[l] = vn;
+        wo[l] += h2 * s.ii[l] * t;
+        kin += mass[l] * vn * vn.transpose();
+    }
+    kin
 }
 
 /// Packed position record of the pair loop: (x, R).
