@@ -619,27 +619,39 @@ def _shear_speed(a: argparse.Namespace, core: Any, st: dict[str, Any],
     rows = [{"code": "granflow", "mode": f"{t} thread(s)", "rate": best(lambda t=t: gf_rate(t))}
             for t in (1, 2)]
     core.threads = 1
-    for mode, threads, label in (("serial", 1, "serial"), ("omp", 2, "2 OpenMP threads"),
-                                 ("mpi", 1, "2 MPI ranks")):
+    for mode, threads, label in LMP_MODES:
         def lmp_rate(m: str = mode, t: int = threads) -> float:
             r = lp.run(st, params, steps, mode=m, threads=t, scene="sheared",
                        env={"OMP_WAIT_POLICY": a.omp_wait_policy})
             return float(r["particle_steps_per_s"])
 
         rows.append({"code": "LAMMPS", "mode": label, "rate": best(lmp_rate)})
+    ratios = _speed_table(f"sheared packing N = {core.n}, {steps} steps (best of {a.repeat}; "
+                          "LAMMPS: Loop time; granflow: run() wall time)", rows,
+                          "1 thread(s)", "2 thread(s)")
+    return {"steps": steps, "repeat": a.repeat, "rows": rows, "ratios": ratios}
+
+
+# LAMMPS's configurations in the speed tables: (mode, OpenMP threads, label)
+LMP_MODES = (("serial", 1, "serial"), ("omp", 2, "2 OpenMP threads"), ("mpi", 1, "2 MPI ranks"))
+
+
+def _speed_table(title: str, rows: list[dict[str, Any]], gf1: str,
+                 gf2: str) -> dict[str, float]:
+    """Print a speed table (granflow's rows ``gf1``/``gf2`` at 1 and 2 threads, LAMMPS's in
+    ``LMP_MODES``) and return the ratios."""
     rate = {(r["code"], r["mode"]): r["rate"] for r in rows}
-    g1, g2 = rate[("granflow", "1 thread(s)")], rate[("granflow", "2 thread(s)")]
+    g1, g2 = rate[("granflow", gf1)], rate[("granflow", gf2)]
     omp, mpi = rate[("LAMMPS", "2 OpenMP threads")], rate[("LAMMPS", "2 MPI ranks")]
     ratios = {"gf1/lmp_serial": g1 / rate[("LAMMPS", "serial")], "gf2/lmp_omp2": g2 / omp,
               "gf2/lmp_mpi2": g2 / mpi, "gf2/best_lmp_2core": g2 / max(omp, mpi),
               "gf2/gf1": g2 / g1}
-    print(f"\n== speed, sheared packing N = {core.n}, {steps} steps (best of {a.repeat}; "
-          "LAMMPS: Loop time; granflow: run() wall time)")
+    print(f"\n== speed, {title}")
     for r in rows:
         print(f"{r['code']:>9} {r['mode']:>28} {r['rate']:>11.3e} particle-steps/s")
     for k, v in ratios.items():
         print(f"{k:>20} {v:6.2f}")
-    return {"steps": steps, "repeat": a.repeat, "rows": rows, "ratios": ratios}
+    return ratios
 
 
 # ----------------------------------------------------------------------------------------------
@@ -671,8 +683,7 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
         rows.append({"code": "granflow", "mode": f"{threads} thread(s), {damping} damping",
                      "rate": best(lambda t=threads, dm=damping: gf_rate(t, dm))})
     path = data_file(st, wd / "channel_speed.data")
-    for mode, threads, label in (("serial", 1, "serial"), ("omp", 2, "2 OpenMP threads"),
-                                 ("mpi", 1, "2 MPI ranks")):
+    for mode, threads, label in LMP_MODES:
         def lmp_rate(m: str = mode, t: int = threads) -> float:
             r = lp.run(path, lmp_params(gn, thermo_every=steps), steps, mode=m, threads=t,
                        scene="channel", env={"OMP_WAIT_POLICY": a.omp_wait_policy})
@@ -681,19 +692,10 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
             return float(r["particle_steps_per_s"])
 
         rows.append({"code": "LAMMPS", "mode": label, "rate": best(lmp_rate)})
-    rate = {(r["code"], r["mode"]): r["rate"] for r in rows}
-    g1 = rate[("granflow", "1 thread(s), e_n damping")]
-    g2 = rate[("granflow", "2 thread(s), e_n damping")]
-    l1 = rate[("LAMMPS", "serial")]
-    l2 = max(rate[("LAMMPS", "2 OpenMP threads")], rate[("LAMMPS", "2 MPI ranks")])
-    ratios = {"gf1/lmp_serial": g1 / l1, "gf2/lmp_omp2": g2 / rate[("LAMMPS", "2 OpenMP threads")],
-              "gf2/lmp_mpi2": g2 / rate[("LAMMPS", "2 MPI ranks")], "gf2/best_lmp_2core": g2 / l2}
-    print(f"\n== speed, channel workload N = {n}, {steps} steps (best of {a.repeat}; "
-          "LAMMPS: Loop time; granflow: run() wall time after the set-up evaluation)")
-    for r in rows:
-        print(f"{r['code']:>9} {r['mode']:>28} {r['rate']:>11.3e} particle-steps/s")
-    for k, v in ratios.items():
-        print(f"{k:>20} {v:6.2f}")
+    ratios = _speed_table(f"channel workload N = {n}, {steps} steps (best of {a.repeat}; "
+                          "LAMMPS: Loop time; granflow: run() wall time after the set-up "
+                          "evaluation)", rows, "1 thread(s), e_n damping",
+                          "2 thread(s), e_n damping")
     print(f"  workload: {info.get('gf_contacts_per_particle_end', 0):.2f} contacts per particle "
           f"(granflow, end), LAMMPS {info.get('lmp_ave_neighs_per_atom')} neighbours per atom, "
           f"{info.get('lmp_neighbor_builds')} rebuilds in {steps} steps")

@@ -707,13 +707,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             let m2 = self.kick_drift_pack_affine(&maps);
             self.domain.after_drift(&maps, &mut self.p);
             // the lists' bounds: a pair's gap closes at most at 2 |v|max + |L| r (its image
-            // shift moves with the cell), and a pair that reaches contact from beyond a skin
-            // does so at r <= cut
+            // shift moves with the cell)
             self.vmax2 = m2;
-            let rate = m2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut;
-            let d = self.nl.step_drift(rate, dt) + self.affine_eps();
-            self.nl.moved += d;
-            self.nl.inner_moved += d;
+            self.nl.add_drift(self.list_speed(m2), dt);
             (self.nl.moved_out(), false)
         };
         self.step_finish(moved, packed, more, t0)
@@ -733,7 +729,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             if packed {
                 self.pack_xr();
             } else {
-                let _ = self.pack();
+                self.pack();
             }
         }
         if self.nl.prune_due() {
@@ -883,9 +879,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .reduce(|| Drift::EMPTY, Drift::merge)
     }
 
-    /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
-    /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m. Returns true if some particle
-    /// moved more than half the skin since the last build (the list must be rebuilt).
     /// A domain's first half-kick and drift (`Domain::begin_step` maps) and the packed
     /// records in one parallel pass (per particle the arithmetic of the domain's own loops,
     /// then of `pack`). Returns the largest squared speed.
@@ -920,25 +913,23 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 #[cfg(target_arch = "x86_64")]
                 if crate::lanes::wide() {
                     // SAFETY: `wide` checked that the CPU has AVX2
-                    return unsafe { affine_kick_pack_avx2(k) };
+                    return unsafe { affine_kick_pack_avx2::<T>(k) };
                 }
-                affine_kick_pack(k)
+                affine_kick_pack::<T>(k)
             })
             .reduce(|| 0.0, f64::max)
     }
 
-    /// Rounding of one drift x' = (1 + dt L) x + dt v of a deforming cell and of its image
-    /// shifts H n, beyond `drift_eps` (zero for a static box).
-    fn affine_eps(&self) -> f64 {
-        if D::PLAIN_NVE {
-            0.0
-        } else {
-            16.0 * f64::EPSILON * (self.domain.h().norm() + self.nl.cut)
-        }
+    /// The speed that bounds how fast a pair's gap can close, per particle (half of it):
+    /// the largest drift speed `sqrt(m2)`, plus in a deforming cell the affine part |L| r / 2
+    /// at the largest distance a pair can reach contact from, r <= `NeighborList::cut`.
+    fn list_speed(&self, m2: f64) -> f64 {
+        m2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut
     }
 
-    /// Pack the step records; returns the largest squared speed.
-    fn pack(&mut self) -> f64 {
+    /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
+    /// v(n+1/2) + dt/2 a(n) (and the same for w), with 1/m.
+    fn pack(&mut self) {
         let n = self.p.len();
         let ch = chunk_size(n);
         let hdt = 0.5 * self.dt;
@@ -949,11 +940,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .par_chunks_mut(ch)
             .zip(self.kin.par_chunks_mut(ch))
             .enumerate()
-            .map(|(c, (a, b))| {
-                let mut m2 = 0.0f64;
+            .for_each(|(c, (a, b))| {
                 for l in 0..a.len() {
                     let i = c * ch + l;
-                    m2 = m2.max(p.v[i].norm_squared());
                     a[l] = xr_record(&p.x[i], p.radius[i]);
                     b[l] = kin_record(
                         &p.v[i],
@@ -966,9 +955,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         p.radius[i],
                     );
                 }
-                m2
-            })
-            .reduce(|| 0.0, f64::max)
+            });
     }
 
     /// The (x, R) records alone (after a rebuild wrapped the positions; see `step_finish`).
@@ -1070,7 +1057,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// evaluation, or after the state was set from outside). As LAMMPS's setup, which skips
     /// the history update.
     pub fn compute_forces_setup(&mut self) {
-        let _ = self.pack();
+        self.pack();
         // the lists' frame from the velocities now, so that the first inner list lasts about
         // `prune_steps` steps like the later ones (and its prune trims the contact lists,
         // which grow by doubling while the first contacts are stored)
@@ -1117,9 +1104,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     fn prune(&mut self) {
         let skin = self.nl.skin;
         let s_in = if self.prune_steps > 0.0 {
-            // (as the bound in `step_once`: the affine part is zero for a static box)
-            let rate = self.vmax2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut;
-            let want = 2.0 * rate * self.dt * self.prune_steps;
+            let want = 2.0 * self.list_speed(self.vmax2) * self.dt * self.prune_steps;
             // below 1/50 of the skin a prune would keep hardly fewer pairs
             let s = want.max(0.02 * skin);
             // at the outer skin it would keep them all: no pruning
@@ -1145,7 +1130,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     fn complete_step(&mut self) {
         if self.cross_pending {
             self.cross_pending = false;
-            self.cross_pass::<false>(0.5 * self.dt);
+            let _ = self.cross_pass::<false>(0.5 * self.dt);
         }
     }
 
@@ -1264,10 +1249,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.diag = reduce_outs(&results);
         if defer && kick > 0.0 && !STATS {
             self.cross_pending = true;
-        } else if !D::PLAIN_NVE && kick > 0.0 {
-            self.kin_sum = self.cross_pass_affine::<STATS>(kick);
         } else {
-            self.cross_pass::<STATS>(kick);
+            self.kin_sum = self.cross_pass::<STATS>(kick);
         }
         self.forces_valid = true;
         self.want_stats = false;
@@ -1276,13 +1259,19 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.timers.gather_phase += (te - tp).as_secs_f64();
     }
 
-    /// Phase 2 of a deforming cell's step: the cross pairs as `cross_pass`, then the cell's
-    /// final half-kick (`Domain::final_kick`, `kick` = dt/2) of each particle once its forces
-    /// are complete. Returns the kinetic sum sum_i m_i v_i (x) v_i after the kick, summed per
-    /// chunk and then over the chunks in order (the same bits for any thread count).
-    fn cross_pass_affine<const STATS: bool>(&mut self, kick: f64) -> M3 {
-        let m = self.domain.final_kick();
+    /// Phase 2: cross pairs in contact onto their second particles, in list order; in a time
+    /// step (`kick` = dt/2), the final half-kick in the same pass (the forces of particle i are
+    /// complete once its cross pairs are added): plain velocity Verlet, or a deforming cell's
+    /// (`Domain::final_kick`), which also returns the kinetic sum sum_i m_i v_i (x) v_i after
+    /// the kick, summed per chunk and then over the chunks in order (the same bits for any
+    /// thread count; zero otherwise).
+    fn cross_pass<const STATS: bool>(&mut self, kick: f64) -> M3 {
         let nl = &self.nl;
+        if nl.n_cross() == 0 && kick == 0.0 {
+            return M3::zeros();
+        }
+        let affine = !D::PLAIN_NVE && kick > 0.0;
+        let m = self.domain.final_kick();
         let n = self.p.len();
         let ch = chunk_size(n);
         let nchunks = n.div_ceil(ch);
@@ -1290,7 +1279,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let mut ps_pieces = stat_pieces(&mut self.pstats, STATS, ch, nchunks);
         let p = &mut self.p;
         let (rad, im, ii, mass) = (&p.radius, &p.inv_mass, &p.inv_inertia, &p.mass);
-        let sums: Vec<M3> = p
+        let chunks = p
             .force
             .par_chunks_mut(ch)
             .zip(p.torque.par_chunks_mut(ch))
@@ -1300,62 +1289,24 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .enumerate()
             .map(|(c, ((((fo, to), vo), wo), ps))| {
                 let r = c * ch..c * ch + fo.len();
-                let s = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r.clone(), kick);
+                let src = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r.clone(), kick);
                 let k = CrossChunk {
                     fo,
                     to,
                     vo,
                     wo,
                     ps,
-                    s: &s,
-                };
-                #[cfg(target_arch = "x86_64")]
-                if crate::lanes::wide() {
-                    // SAFETY: `wide` checked that the CPU has AVX2
-                    return unsafe { cross_kick_affine_avx2::<STATS, T>(k, &m, &mass[r]) };
-                }
-                cross_kick_affine::<STATS, T>(k, &m, &mass[r])
-            })
-            .collect();
-        sums.iter().fold(M3::zeros(), |a, b| a + b)
-    }
-
-    /// Phase 2: cross pairs in contact onto their second particles, in list order; for a
-    /// plain NVE domain in a time step (`kick` = dt/2), the final half-kick in the same pass
-    /// (the forces of particle i are complete once its cross pairs are added).
-    fn cross_pass<const STATS: bool>(&mut self, kick: f64) {
-        let nl = &self.nl;
-        if nl.n_cross() == 0 && kick == 0.0 {
-            return;
-        }
-        let n = self.p.len();
-        let ch = chunk_size(n);
-        let nchunks = n.div_ceil(ch);
-        let cross = &self.cross;
-        let cstat = &self.cross_stats;
-        let cidx = &self.cross_idx;
-        let mut ps_pieces = stat_pieces(&mut self.pstats, STATS, ch, nchunks);
-        let p = &mut self.p;
-        let (rad, im, ii) = (&p.radius, &p.inv_mass, &p.inv_inertia);
-        p.force
-            .par_chunks_mut(ch)
-            .zip(p.torque.par_chunks_mut(ch))
-            .zip(p.v.par_chunks_mut(ch))
-            .zip(p.omega.par_chunks_mut(ch))
-            .zip(ps_pieces.par_drain(..))
-            .enumerate()
-            .for_each(|(c, ((((fo, to), vo), wo), ps))| {
-                let r = c * ch..c * ch + fo.len();
-                let src = CrossSrc::new(nl, cross, cstat, cidx, (rad, im, ii), r, kick);
-                cross_kick_chunk::<STATS, T>(CrossChunk {
-                    fo,
-                    to,
-                    vo,
-                    wo,
-                    ps,
                     s: &src,
-                });
+                };
+                cross_kick_chunk::<STATS, T>(k, affine.then(|| (&m, &mass[r])))
             });
+        if affine {
+            let sums: Vec<M3> = chunks.collect();
+            sums.iter().fold(M3::zeros(), |a, b| a + b)
+        } else {
+            chunks.for_each(drop);
+            M3::zeros()
+        }
     }
 }
 
@@ -1493,26 +1444,31 @@ struct CrossChunk<'a, 'b> {
     s: &'b CrossSrc<'b>,
 }
 
+/// A deforming cell's final half-kick map and the chunk's masses (see `cross_kick`).
+type AffineFinal<'a> = Option<(&'a crate::domain::StepMaps, &'a [f64])>;
+
 /// Phase 2 for one chunk: the cross pairs in contact onto their second particles, in list
-/// order, then (plain NVE in a step, `kick` > 0) the final half-kick; AVX2 where the CPU has
-/// it (the same bits either way).
-fn cross_kick_chunk<const STATS: bool, T: Friction>(k: CrossChunk) {
+/// order, then (in a step, `kick` > 0) the final half-kick; AVX2 where the CPU has it (the
+/// same bits either way).
+fn cross_kick_chunk<const STATS: bool, T: Friction>(k: CrossChunk, aff: AffineFinal) -> M3 {
     #[cfg(target_arch = "x86_64")]
     if crate::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
-        return unsafe { cross_kick_avx2::<STATS, T>(k) };
+        return unsafe { cross_kick_avx2::<STATS, T>(k, aff) };
     }
-    cross_kick::<STATS, T>(k)
+    cross_kick::<STATS, T>(k, aff)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn cross_kick_avx2<const STATS: bool, T: Friction>(k: CrossChunk) {
-    cross_kick::<STATS, T>(k)
+fn cross_kick_avx2<const STATS: bool, T: Friction>(k: CrossChunk, aff: AffineFinal) -> M3 {
+    cross_kick::<STATS, T>(k, aff)
 }
 
+/// The loop of phase 2 over one chunk. With `aff` (a deforming cell in a step, `s.kick` =
+/// dt/2) the kick is the cell's and the chunk's kinetic sum is returned (zero otherwise).
 #[inline(always)]
-fn cross_kick<const STATS: bool, T: Friction>(k: CrossChunk) {
+fn cross_kick<const STATS: bool, T: Friction>(k: CrossChunk, aff: AffineFinal) -> M3 {
     let CrossChunk {
         fo,
         to,
@@ -1525,10 +1481,32 @@ fn cross_kick<const STATS: bool, T: Friction>(k: CrossChunk) {
     assert!(to.len() == n && vo.len() == n && wo.len() == n && s.cs.len() == n + 1);
     assert!(s.rad.len() == n && s.im.len() == n && s.ii.len() == n);
     assert!(!STATS || ps.len() == n);
-    for l in 0..n {
-        // SAFETY: l < n, the length of every per-particle slice (asserted above)
-        unsafe { cross_one::<STATS, T>(l, fo, to, vo, wo, ps, s) };
+    let mut kin = M3::zeros();
+    match aff {
+        None => {
+            for l in 0..n {
+                // SAFETY: l < n, the length of every per-particle slice (asserted above)
+                unsafe { cross_one::<STATS, T>(l, fo, to, vo, wo, ps, s) };
+            }
+        }
+        Some((m, mass)) => {
+            assert!(mass.len() == n);
+            let h2 = s.kick;
+            for l in 0..n {
+                let (mut f, mut t) = (fo[l], to[l]);
+                // SAFETY: l < n, the length of every per-particle slice (asserted above)
+                unsafe { cross_sum::<STATS, T>(l, &mut f, &mut t, ps, s) };
+                (fo[l], to[l]) = (f, t);
+                let vn = m.kick(&vo[l], &f, s.im[l], h2);
+                vo[l] = vn;
+                if T::FRICTIONAL {
+                    wo[l] += h2 * s.ii[l] * t;
+                }
+                kin += mass[l] * vn * vn.transpose();
+            }
+        }
     }
+    kin
 }
 
 /// The cross pairs in contact of particle l of a chunk added onto (f, t), in list order
@@ -1994,14 +1972,14 @@ struct AffineKick<'a, 'b> {
 /// `affine_kick_pack` compiled for AVX2 (the same IEEE operations: the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn affine_kick_pack_avx2(k: AffineKick) -> f64 {
-    affine_kick_pack(k)
+fn affine_kick_pack_avx2<T: Friction>(k: AffineKick) -> f64 {
+    affine_kick_pack::<T>(k)
 }
 
 /// The loop of `Engine::kick_drift_pack_affine` over one chunk; returns the largest squared
 /// speed. (A plain function, not a closure, so that the AVX2 twin inlines it.)
 #[inline(always)]
-fn affine_kick_pack(k: AffineKick) -> f64 {
+fn affine_kick_pack<T: Friction>(k: AffineKick) -> f64 {
     let AffineKick {
         out: (x, v, w, a, b),
         src: (f, t, im, ii, rad),
@@ -2016,7 +1994,12 @@ fn affine_kick_pack(k: AffineKick) -> f64 {
     let mut m2 = 0.0f64;
     for l in 0..n {
         let vn = m.kick(&v[l], &f[l], im[l], h2);
-        let wn = w[l] + h2 * ii[l] * t[l];
+        // without friction there are no torques: spins never change
+        let wn = if T::FRICTIONAL {
+            w[l] + h2 * ii[l] * t[l]
+        } else {
+            w[l]
+        };
         let xn = m.a * x[l] + dt * vn;
         (v[l], w[l], x[l]) = (vn, wn, xn);
         m2 = m2.max(vn.norm_squared());
@@ -2024,52 +2007,6 @@ fn affine_kick_pack(k: AffineKick) -> f64 {
         b[l] = kin_record(&vn, &wn, &f[l], &t[l], im[l], ii[l], h2, rad[l]);
     }
     m2
-}
-
-/// `cross_kick_affine` compiled for AVX2 (the same IEEE operations: the same bits).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn cross_kick_affine_avx2<const STATS: bool, T: Friction>(
-    k: CrossChunk,
-    m: &crate::domain::StepMaps,
-    mass: &[f64],
-) -> M3 {
-    cross_kick_affine::<STATS, T>(k, m, mass)
-}
-
-/// The loop of `Engine::cross_pass_affine` over one chunk (`s.kick` = dt/2): the cross pairs,
-/// the cell's final half-kick and the chunk's kinetic sum.
-#[inline(always)]
-fn cross_kick_affine<const STATS: bool, T: Friction>(
-    k: CrossChunk,
-    m: &crate::domain::StepMaps,
-    mass: &[f64],
-) -> M3 {
-    let CrossChunk {
-        fo,
-        to,
-        vo,
-        wo,
-        ps,
-        s,
-    } = k;
-    let n = fo.len();
-    assert!(to.len() == n && vo.len() == n && wo.len() == n && s.cs.len() == n + 1);
-    assert!(s.rad.len() == n && s.im.len() == n && s.ii.len() == n && mass.len() == n);
-    assert!(!STATS || ps.len() == n);
-    let h2 = s.kick;
-    let mut kin = M3::zeros();
-    for l in 0..n {
-        let (mut f, mut t) = (fo[l], to[l]);
-        // SAFETY: l < n, the length of every per-particle slice (asserted above)
-        unsafe { cross_sum::<STATS, T>(l, &mut f, &mut t, ps, s) };
-        (fo[l], to[l]) = (f, t);
-        let vn = m.kick(&vo[l], &f, s.im[l], h2);
-        vo[l] = vn;
-        wo[l] += h2 * s.ii[l] * t;
-        kin += mass[l] * vn * vn.transpose();
-    }
-    kin
 }
 
 /// Packed position record of the pair loop: (x, R).

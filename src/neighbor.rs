@@ -388,6 +388,11 @@ impl NeighborList {
         // a drift x + v dt rounds by at most half an ulp per coordinate; positions stay
         // within half a skin of where they were wrapped until the next build
         self.drift_eps = 4.0 * f64::EPSILON * (1.0 + xmax + self.skin);
+        if !D::PLAIN_NVE {
+            // a deforming cell's drift x' = (1 + dt L) x + dt v and image shifts H n round
+            // by a few ulps of |H| (which the list's bound lets grow by well under 2x)
+            self.drift_eps += 16.0 * f64::EPSILON * (2.0 * dom.h().norm() + cut);
+        }
         self.builds += 1;
         self.valid = true;
         (!identity).then_some(perm)

@@ -49,7 +49,6 @@ pub struct PrCell {
     /// Internal stress of the last completed step (contact part, kinetic part).
     pub sigma_c: M3,
     pub sigma_k: M3,
-    h_build: M3,
     pub flips: u64,
     /// `flips` at the last neighbour build.
     flips_build: u64,
@@ -98,7 +97,6 @@ impl PrCell {
             drive: M3::zeros(),
             sigma_c: M3::zeros(),
             sigma_k: M3::zeros(),
-            h_build: h,
             flips: 0,
             flips_build: 0,
             n,
@@ -122,6 +120,18 @@ impl PrCell {
         s[(0, 1)] = -self.tau_ext;
         s[(1, 0)] = -self.tau_ext;
         s
+    }
+
+    /// The particles' maps at the current cell momentum: the half-kick's drag l = p_g / W_g
+    /// with its trace term, and a drift over `dt` (r += dt (v' + L r); H += dt L H: reduced
+    /// coordinates move only with v').
+    fn maps(&self, dt: f64) -> StepMaps {
+        let l = self.l_grad();
+        StepMaps {
+            l,
+            tr: l.trace() / (3.0 * self.n as f64),
+            a: M3::identity() + dt * l,
+        }
     }
 
     fn update_drive(&mut self, virial: &M3, kin: &M3) {
@@ -241,13 +251,7 @@ impl Domain for PrCell {
 
     fn begin_step(&mut self, dt: f64) -> StepMaps {
         self.pg += (0.5 * dt) * self.drive;
-        let l = self.l_grad();
-        // drift: r += dt (v' + L r); H += dt L H (reduced coordinates move only with v')
-        StepMaps {
-            l,
-            tr: l.trace() / (3.0 * self.n as f64),
-            a: M3::identity() + dt * l,
-        }
+        self.maps(dt)
     }
 
     fn after_drift(&mut self, m: &StepMaps, p: &mut Particles) {
@@ -257,12 +261,7 @@ impl Domain for PrCell {
     }
 
     fn final_kick(&self) -> StepMaps {
-        let l = self.l_grad();
-        StepMaps {
-            l,
-            tr: l.trace() / (3.0 * self.n as f64),
-            a: M3::identity(),
-        }
+        self.maps(0.0)
     }
 
     fn end_step(&mut self, dt: f64, virial: &M3, kinetic: &M3) {
@@ -314,7 +313,6 @@ impl Domain for PrCell {
         self.flips != self.flips_build
     }
     fn on_rebuild(&mut self) {
-        self.h_build = self.h;
         self.flips_build = self.flips;
     }
     fn observables(&self) -> Vec<(String, f64)> {
@@ -340,7 +338,8 @@ impl Domain for PrCell {
         v.extend(self.h.iter());
         v.extend(self.pg.iter());
         v.extend(self.drive.iter());
-        v.extend(self.h_build.iter());
+        // (the slot of the cell at the last build, which earlier versions kept)
+        v.extend(self.h.iter());
         v.push(self.flips as f64);
         v
     }
@@ -353,7 +352,6 @@ impl Domain for PrCell {
         self.set_h(M3::from_column_slice(&s[0..9]));
         self.pg = M3::from_column_slice(&s[9..18]);
         self.drive = M3::from_column_slice(&s[18..27]);
-        self.h_build = M3::from_column_slice(&s[27..36]);
         self.flips = s[36] as u64;
         // (checkpoints are written between steps, when a flip has had its rebuild)
         self.flips_build = self.flips;
