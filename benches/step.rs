@@ -25,6 +25,9 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     if let Some(k) = std::env::var("PRUNE").ok().and_then(|s| s.parse().ok()) {
         e.prune_steps = k;
     }
+    if std::env::var_os("NO_TEAM").is_some() {
+        e.team = false;
+    }
     e.run(10).unwrap();
     e.timers = Default::default();
     let b0 = e.nl.builds;

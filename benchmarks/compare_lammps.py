@@ -599,34 +599,34 @@ def _shear_speed(a: argparse.Namespace, core: Any, st: dict[str, Any],
                  params: dict[str, Any]) -> dict[str, Any]:
     """Speed on the sheared packing, as on the channel: granflow's cell going on from its
     steady state at 1 and 2 threads, LAMMPS's ``fix deform`` on the packing handed over (serial,
-    2 OpenMP threads, 2 MPI ranks), ``--shear-speed-steps`` each, best of ``--repeat``. Not like
-    for like in granflow's disfavour: the cell integrates the Parrinello-Rahman cell dynamics
-    (virial and kinetic stress every step), LAMMPS a prescribed deformation."""
+    2 OpenMP threads, 2 MPI ranks), ``--shear-speed-steps`` each, ``--repeat`` interleaved
+    rounds (``_timed_rounds``). Not like for like in granflow's disfavour: the cell integrates
+    the Parrinello-Rahman cell dynamics (virial and kinetic stress every step), LAMMPS a prescribed deformation."""
     steps = a.shear_speed_steps
     params = {**params, "thermo_every": steps}
     params.pop("extra", None)
-
-    def best(fn: Any) -> float:
-        return max(fn() for _ in range(a.repeat))
 
     def gf_rate(threads: int) -> float:
         core.threads = threads
         core.run(1)  # pool and team set-up outside the timing
         t0 = time.perf_counter()
         core.run(steps)
-        return core.n * steps / (time.perf_counter() - t0)
+        rate = core.n * steps / (time.perf_counter() - t0)
+        core.threads = 1
+        return rate
 
-    rows = [{"code": "granflow", "mode": f"{t} thread(s)", "rate": best(lambda t=t: gf_rate(t))}
-            for t in (1, 2)]
-    core.threads = 1
+    configs: list[tuple[str, str, Any]] = [
+        ("granflow", f"{t} thread(s)", lambda t=t: gf_rate(t)) for t in (1, 2)]
     for mode, threads, label in LMP_MODES:
         def lmp_rate(m: str = mode, t: int = threads) -> float:
             r = lp.run(st, params, steps, mode=m, threads=t, scene="sheared",
                        env={"OMP_WAIT_POLICY": a.omp_wait_policy})
             return float(r["particle_steps_per_s"])
 
-        rows.append({"code": "LAMMPS", "mode": label, "rate": best(lmp_rate)})
-    ratios = _speed_table(f"sheared packing N = {core.n}, {steps} steps (best of {a.repeat}; "
+        configs.append(("LAMMPS", label, lmp_rate))
+    rows = _timed_rounds(configs, a.repeat)
+    ratios = _speed_table(f"sheared packing N = {core.n}, {steps} steps ({a.repeat} interleaved "
+                          "rounds; "
                           "LAMMPS: Loop time; granflow: run() wall time)", rows,
                           "1 thread(s)", "2 thread(s)")
     return {"steps": steps, "repeat": a.repeat, "rows": rows, "ratios": ratios}
@@ -636,22 +636,52 @@ def _shear_speed(a: argparse.Namespace, core: Any, st: dict[str, Any],
 LMP_MODES = (("serial", 1, "serial"), ("omp", 2, "2 OpenMP threads"), ("mpi", 1, "2 MPI ranks"))
 
 
+def _timed_rounds(configs: list[tuple[str, str, Any]], repeat: int) -> list[dict[str, Any]]:
+    """Time every configuration ``(code, mode, fn)`` once per round, ``repeat`` rounds, the
+    configurations interleaved within a round: this VM's speed drifts by 5-10 % (and a second
+    core's by up to 40 %) over minutes, and interleaving spreads a slow spell over all
+    configurations instead of charging it to whichever ran then. Each row keeps every
+    round's rate (``rates``) and its best (``rate``)."""
+    rates: list[list[float]] = [[] for _ in configs]
+    for _ in range(repeat):
+        for k, (_, _, fn) in enumerate(configs):
+            rates[k].append(float(fn()))
+    return [{"code": c, "mode": m, "rate": max(r), "median": float(np.median(r)), "rates": r}
+            for (c, m, _), r in zip(configs, rates, strict=True)]
+
+
 def _speed_table(title: str, rows: list[dict[str, Any]], gf1: str,
                  gf2: str) -> dict[str, float]:
     """Print a speed table (granflow's rows ``gf1``/``gf2`` at 1 and 2 threads, LAMMPS's in
-    ``LMP_MODES``) and return the ratios."""
-    rate = {(r["code"], r["mode"]): r["rate"] for r in rows}
-    g1, g2 = rate[("granflow", gf1)], rate[("granflow", gf2)]
-    omp, mpi = rate[("LAMMPS", "2 OpenMP threads")], rate[("LAMMPS", "2 MPI ranks")]
-    ratios = {"gf1/lmp_serial": g1 / rate[("LAMMPS", "serial")], "gf2/lmp_omp2": g2 / omp,
-              "gf2/lmp_mpi2": g2 / mpi, "gf2/best_lmp_2core": g2 / max(omp, mpi),
-              "gf2/gf1": g2 / g1}
+    ``LMP_MODES``) and return the ratios: of the best rates, and the median over rounds of
+    each round's ratio (the two codes timed minutes apart at most, ``_timed_rounds``)."""
+    by = {(r["code"], r["mode"]): r for r in rows}
+    g1, g2 = by[("granflow", gf1)], by[("granflow", gf2)]
+    ser = by[("LAMMPS", "serial")]
+    omp, mpi = by[("LAMMPS", "2 OpenMP threads")], by[("LAMMPS", "2 MPI ranks")]
+
+    def paired(a: list[float], b: list[float]) -> float:
+        return float(np.median(np.asarray(a) / np.asarray(b)))
+
+    best2 = [max(o, m) for o, m in zip(omp["rates"], mpi["rates"], strict=True)]
+    ratios = {"gf1/lmp_serial": g1["rate"] / ser["rate"], "gf2/lmp_omp2": g2["rate"] / omp["rate"],
+              "gf2/lmp_mpi2": g2["rate"] / mpi["rate"],
+              "gf2/best_lmp_2core": g2["rate"] / max(omp["rate"], mpi["rate"]),
+              "gf2/gf1": g2["rate"] / g1["rate"]}
+    per_round = {"gf1/lmp_serial": paired(g1["rates"], ser["rates"]),
+                 "gf2/lmp_omp2": paired(g2["rates"], omp["rates"]),
+                 "gf2/lmp_mpi2": paired(g2["rates"], mpi["rates"]),
+                 "gf2/best_lmp_2core": paired(g2["rates"], best2),
+                 "gf2/gf1": paired(g2["rates"], g1["rates"])}
     print(f"\n== speed, {title}")
+    print(f"{'':>9} {'':>28} {'best':>11} {'median':>11}   every round")
     for r in rows:
-        print(f"{r['code']:>9} {r['mode']:>28} {r['rate']:>11.3e} particle-steps/s")
+        each = " ".join(f"{x:.3e}" for x in r["rates"])
+        print(f"{r['code']:>9} {r['mode']:>28} {r['rate']:>11.3e} {r['median']:>11.3e}   {each}")
+    print(f"{'ratio':>20} {'of best':>8} {'median of rounds':>17}")
     for k, v in ratios.items():
-        print(f"{k:>20} {v:6.2f}")
-    return ratios
+        print(f"{k:>20} {v:8.2f} {per_round[k]:17.2f}")
+    return {**ratios, **{f"{k} (median of rounds)": v for k, v in per_round.items()}}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -663,11 +693,6 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
     n = len(st["x"])
     steps = a.speed_steps
     gn = gamma_n_workload(st["d"])
-    rows: list[dict[str, Any]] = []
-
-    def best(fn: Any) -> float:
-        return max(fn() for _ in range(a.repeat))
-
     info: dict[str, Any] = {}
 
     def gf_rate(threads: int, damping: str) -> float:
@@ -679,9 +704,9 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
         info["gf_contacts_per_particle_end"] = sim.diagnostics()["contacts"] / n
         return rate
 
-    for threads, damping in ((1, "e_n"), (2, "e_n"), (1, "xi_n")):
-        rows.append({"code": "granflow", "mode": f"{threads} thread(s), {damping} damping",
-                     "rate": best(lambda t=threads, dm=damping: gf_rate(t, dm))})
+    configs: list[tuple[str, str, Any]] = [
+        ("granflow", f"{t} thread(s), {dm} damping", lambda t=t, dm=dm: gf_rate(t, dm))
+        for t, dm in ((1, "e_n"), (2, "e_n"), (1, "xi_n"))]
     path = data_file(st, wd / "channel_speed.data")
     for mode, threads, label in LMP_MODES:
         def lmp_rate(m: str = mode, t: int = threads) -> float:
@@ -691,10 +716,11 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
             info["lmp_ave_neighs_per_atom"] = r["ave_neighs_per_atom"]
             return float(r["particle_steps_per_s"])
 
-        rows.append({"code": "LAMMPS", "mode": label, "rate": best(lmp_rate)})
-    ratios = _speed_table(f"channel workload N = {n}, {steps} steps (best of {a.repeat}; "
-                          "LAMMPS: Loop time; granflow: run() wall time after the set-up "
-                          "evaluation)", rows, "1 thread(s), e_n damping",
+        configs.append(("LAMMPS", label, lmp_rate))
+    rows = _timed_rounds(configs, a.repeat)
+    ratios = _speed_table(f"channel workload N = {n}, {steps} steps ({a.repeat} "
+                          "interleaved rounds; LAMMPS: Loop time; granflow: run() wall time "
+                          "after the set-up evaluation)", rows, "1 thread(s), e_n damping",
                           "2 thread(s), e_n damping")
     print(f"  workload: {info.get('gf_contacts_per_particle_end', 0):.2f} contacts per particle "
           f"(granflow, end), LAMMPS {info.get('lmp_ave_neighs_per_atom')} neighbours per atom, "
