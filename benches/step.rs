@@ -20,10 +20,21 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     dt: f64,
     steps: u64,
 ) {
+    // PAD bytes allocated first: shifts the heap layout (for layout-dependent effects)
+    let _pad: Vec<u8> = vec![
+        1;
+        std::env::var("PAD")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0)
+    ];
     let mut e: Engine<Hooke, T, OrthoBox, W, G> =
         Engine::new(p, law, bx, walls, body, Some(dt), skin()).unwrap();
     if let Some(k) = std::env::var("PRUNE").ok().and_then(|s| s.parse().ok()) {
         e.prune_steps = k;
+    }
+    if let Some(k) = std::env::var("FUSE").ok().and_then(|s| s.parse().ok()) {
+        e.fuse_from = k;
     }
     if std::env::var_os("NO_TEAM").is_some() {
         e.team = false;
@@ -115,6 +126,15 @@ fn main() {
     let law = LawParams::new(1e6, 0.82, mu);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
+        .start_handler(|i| {
+            if std::env::var_os("PIN").is_some() {
+                extern "C" {
+                    fn sched_setaffinity(pid: i32, size: usize, mask: *const u64) -> i32;
+                }
+                let m: u64 = 1 << i;
+                unsafe { sched_setaffinity(0, 8, &m) };
+            }
+        })
         .build()
         .unwrap();
     println!("kind={kind} threads={threads} mu={mu}");
