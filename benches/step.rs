@@ -4,6 +4,9 @@
 //! particle x y z vx vy vz wx wy wz d. A channel has walls at x = 0 and x = Lx (same law as the
 //! pairs), periodic y and z, gravity -1 along y (000's channel). `benchmarks/kernel_state.py`
 //! writes such files.
+//! Knobs (environment): PRUNE=k prune interval, FUSE=n fused sweep from n particles,
+//! NO_TEAM=1 steps through rayon only, PAD=b allocate b bytes first (shifts the heap layout),
+//! PIN=1 pins worker i to CPU i.
 use granflow::contact::{Coulomb, Form, Friction, Frictionless, Hooke, LawParams};
 use granflow::domain::OrthoBox;
 use granflow::engine::{Body, Engine, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
