@@ -5,7 +5,7 @@
 //! pairs), periodic y and z, gravity -1 along y (000's channel). `benchmarks/kernel_state.py`
 //! writes such files.
 //! Knobs (environment): PRUNE=k prune interval, FUSE=n fused sweep from n particles,
-//! NO_TEAM=1 steps through rayon only, PAD=b allocate b bytes first (shifts the heap layout),
+//! NO_TEAM=1 steps through rayon only, NO_PRUNE_TEAM=1 prunes outside the team, PAD=b allocate b bytes first (shifts the heap layout),
 //! PIN=1 pins worker i to CPU i.
 use granflow::contact::{Coulomb, Form, Friction, Frictionless, Hooke, LawParams};
 use granflow::domain::OrthoBox;
@@ -38,6 +38,9 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     }
     if let Some(k) = std::env::var("FUSE").ok().and_then(|s| s.parse().ok()) {
         e.fuse_from = k;
+    }
+    if std::env::var_os("NO_PRUNE_TEAM").is_some() {
+        e.prune_in_team = false;
     }
     if std::env::var_os("NO_TEAM").is_some() {
         e.team = false;

@@ -282,6 +282,15 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Run stretches of plain steps in one team of threads (`team`); the results are the
     /// same bits either way (off: every step forks and joins its passes through rayon).
     pub team: bool,
+    /// Prunes due inside a team stint are done by the team (each thread its chunks) instead
+    /// of ending the stint (on by default; the same results either way).
+    pub prune_in_team: bool,
+    /// Prunes done inside team stints (a count for tests and benchmarks).
+    pub team_prunes: u64,
+    /// Room kept in the cross index for a prune inside a team (None: an eighth more, +64;
+    /// Some(k): the index shrunk, then k more: for tests of the fallback, where a prune that
+    /// needs more is done outside).
+    pub(crate) team_cross_room: Option<usize>,
     /// Systems of at least this many particles run their team steps as one sweep per step
     /// (`team`: each chunk packed, then its forces computed while its records are in
     /// cache); smaller ones in two passes. The same bits either way.
@@ -396,6 +405,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             vmax2: f64::INFINITY,
             kin_sum: M3::zeros(),
             team: true,
+            prune_in_team: true,
+            team_prunes: 0,
+            team_cross_room: None,
             fuse_from: FUSE_N,
             fuse_margin: 1.25,
         };
@@ -924,7 +936,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// the largest drift speed `sqrt(m2)`, plus in a deforming cell the affine part |L| r / 2
     /// at the largest distance a pair can reach contact from, r <= `NeighborList::cut`.
     fn list_speed(&self, m2: f64) -> f64 {
-        m2.sqrt() + 0.5 * self.domain.affine_rate() * self.nl.cut
+        list_speed(m2, self.domain.affine_rate(), self.nl.cut)
     }
 
     /// Pack the step records: (x, R) and the velocities predicted to the end of the step,
@@ -1102,20 +1114,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// lists' frame (the whole list where the domain moves particles itself, or pruning is
     /// off).
     fn prune(&mut self) {
-        let skin = self.nl.skin;
-        let s_in = if self.prune_steps > 0.0 {
-            let want = 2.0 * self.list_speed(self.vmax2) * self.dt * self.prune_steps;
-            // below 1/50 of the skin a prune would keep hardly fewer pairs
-            let s = want.max(0.02 * skin);
-            // at the outer skin it would keep them all: no pruning
-            if s < 0.5 * skin {
-                s
-            } else {
-                f64::INFINITY
-            }
-        } else {
-            f64::INFINITY
-        };
+        let s_in = inner_skin_for(
+            self.prune_steps,
+            self.nl.skin,
+            self.list_speed(self.vmax2),
+            self.dt,
+        );
         let shifts = image_shifts(&self.domain.h());
         self.nl.prune(&self.xr, &shifts, s_in);
         self.cross_idx.clear();
@@ -2007,6 +2011,31 @@ fn affine_kick_pack<T: Friction>(k: AffineKick) -> f64 {
         b[l] = kin_record(&vn, &wn, &f[l], &t[l], im[l], ii[l], h2, rad[l]);
     }
     m2
+}
+
+/// `Engine::list_speed` from its parts (the domain's affine rate, the list's reach).
+#[inline]
+fn list_speed(m2: f64, affine_rate: f64, cut: f64) -> f64 {
+    m2.sqrt() + 0.5 * affine_rate * cut
+}
+
+/// The inner skin of a prune (`Engine::prune`): chosen to last `prune_steps` steps at the
+/// gap-closing speed `speed` (`list_speed`), within 1/50 of the outer skin and below half of
+/// it (else every pair is kept: no pruning, infinite).
+fn inner_skin_for(prune_steps: f64, skin: f64, speed: f64, dt: f64) -> f64 {
+    if prune_steps > 0.0 {
+        let want = 2.0 * speed * dt * prune_steps;
+        // below 1/50 of the skin a prune would keep hardly fewer pairs
+        let s = want.max(0.02 * skin);
+        // at the outer skin it would keep them all: no pruning
+        if s < 0.5 * skin {
+            s
+        } else {
+            f64::INFINITY
+        }
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Packed position record of the pair loop: (x, R).

@@ -442,6 +442,49 @@ impl NeighborList {
                 ic, i0, i1, own_start, pair_j, pair_img, xr, shifts, inner_skin,
             );
         });
+        self.prune_finish(inner_skin);
+    }
+
+    /// `prune`'s per-chunk part for chunk `c`, for a team of threads that prunes its chunks
+    /// in place (`prune_finish` then runs once). The inner list must already have its
+    /// chunks (a first `prune` made them).
+    ///
+    /// # Safety
+    /// `this` points to a live list; no other thread works on chunk `c` meanwhile, and none
+    /// writes the list's other fields until every chunk is done.
+    pub(crate) unsafe fn prune_part(
+        this: *mut NeighborList,
+        c: usize,
+        xr: &[[f64; 4]],
+        shifts: &[[f64; 4]; 27],
+        inner_skin: f64,
+    ) {
+        // SAFETY (caller): shared views of fields no one writes, and chunk c alone
+        unsafe {
+            let nl = &*this;
+            let n = nl.own_start.len() - 1;
+            let ch = chunk_size(n);
+            assert!(c < nl.inner.len());
+            // (`as_ptr` takes no reference to the other chunks)
+            let ic = &mut *(nl.inner.as_ptr() as *mut InnerChunk).add(c);
+            let (i0, i1) = (c * ch, ((c + 1) * ch).min(n));
+            prune_chunk(
+                ic,
+                i0,
+                i1,
+                &nl.own_start,
+                &nl.pair_j,
+                &nl.pair_img,
+                xr,
+                shifts,
+                inner_skin,
+            );
+        }
+    }
+
+    /// The serial end of a prune: number the cross pairs, set the inner bound.
+    pub(crate) fn prune_finish(&mut self, inner_skin: f64) {
+        let n = self.own_start.len().saturating_sub(1);
         self.build_cross(n);
         self.inner_skin = inner_skin;
         self.inner_moved = 0.0;

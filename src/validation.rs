@@ -478,7 +478,9 @@ fn team_steps_change_no_bits() {
     // Fused sweeps (`fuse`: the fusing margin) too: with a margin of 0 every step is fused,
     // so the steps that build or prune first compute their forces twice (the first time
     // with the lists out of date, and overwriting the forces the records came from).
-    let run = |team: bool, threads: usize, fuse: Option<f64>| {
+    // Prunes due inside a stint are done by the team (`prune_in_team`), or outside when the
+    // cross index has no room for them (`team_cross_room` Some(0): some of each).
+    let run_with = |team: bool, threads: usize, fuse: Option<f64>, room: Option<usize>| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -486,19 +488,35 @@ fn team_steps_change_no_bits() {
         pool.install(|| {
             let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
             s.team = team;
+            s.team_cross_room = room;
             if let Some(m) = fuse {
                 s.fuse_from = 0;
                 s.fuse_margin = m;
             }
             s.run(700).unwrap();
-            (walled_state(&s), s.nl.builds, s.nl.prunes)
+            (walled_state(&s), s.nl.builds, s.nl.prunes, s.team_prunes)
         })
+    };
+    let run = |team: bool, threads: usize, fuse: Option<f64>| {
+        let (st, b, p, _) = run_with(team, threads, fuse, None);
+        (st, b, p)
     };
     let (want, builds, prunes) = run(false, 2, None);
     assert!(builds > 1 && prunes > 3, "builds {builds} prunes {prunes}");
     assert!(want.1[..3].iter().any(|&c| c != 0.0), "no wall impulse");
-    assert_eq!(run(true, 2, None).0, want);
-    assert_eq!(run(true, 1, None).0, want);
+    for threads in [2, 1] {
+        let (st, b, p, tp) = run_with(true, threads, None, None);
+        assert_eq!(st, want, "{threads} threads");
+        assert_eq!((b, p), (builds, prunes));
+        assert!(tp > 0 && tp < prunes, "prunes in the team {tp} of {prunes}");
+        let (st, _, p, tq) = run_with(true, threads, None, Some(0));
+        assert_eq!(st, want, "{threads} threads, no room");
+        assert_eq!(p, prunes);
+        assert!(
+            tq < tp,
+            "without room: {tq} prunes in the team, with room {tp}"
+        );
+    }
     for fuse in [Some(0.0), Some(1.25)] {
         assert_eq!(run(true, 2, fuse).0, want, "fused {fuse:?}");
         assert_eq!(run(true, 1, fuse).0, want, "fused {fuse:?}");

@@ -119,6 +119,10 @@ unsafe impl<X> Send for Ptr<X> {}
 unsafe impl<X> Sync for Ptr<X> {}
 
 impl<X> Ptr<X> {
+    /// The pointer (a method, so that a closure captures the whole `Ptr`, which is `Sync`).
+    fn get(&self) -> *mut X {
+        self.0
+    }
     /// # Safety
     /// `r` lies within the allocation and no other thread touches it during the pass.
     #[allow(clippy::mut_from_ref)]
@@ -310,11 +314,29 @@ where
         ];
         let pcross = Ptr(self.cross.as_mut_ptr());
         let pcstat = Ptr(self.cross_stats.as_mut_ptr());
+        // room for the cross index of a prune inside the team (it must not move: every
+        // thread holds its address); a prune that needs more is done outside
+        let more_cross = match self.team_cross_room {
+            Some(k) => {
+                self.cross_idx.shrink_to_fit();
+                k
+            }
+            None => self.cross_idx.len() / 8 + 64,
+        };
+        self.cross_idx.reserve(more_cross);
+        let pruned = AtomicUsize::new(0);
         let pcidx = Ptr(self.cross_idx.as_mut_ptr());
-        let ncidx = self.cross_idx.len();
+        let pcidx_vec = Ptr(&mut self.cross_idx as *mut Vec<u32>);
+        let cidx_cap = self.cross_idx.capacity();
         let (rad, im, ii, mass): (&[f64], &[f64], &[f64], &[f64]) =
             (radius, inv_mass, inv_inertia, mass);
-        let (nl, law, dom) = (&self.nl, &self.law, &self.domain);
+        // the lists: read by every thread, changed only by a prune inside the team (chunks
+        // by their threads, the rest by thread 0, between barriers), so each thread takes a
+        // fresh view after it
+        let pnl = Ptr(&mut self.nl as *mut NeighborList);
+        let (law, dom) = (&self.law, &self.domain);
+        let prune_steps = self.prune_steps;
+        let in_team_prune = self.prune_in_team;
         let (walls, body) = (&self.walls, &self.body);
         let guards = &self.guards;
 
@@ -322,6 +344,7 @@ where
         let barrier = Barrier::new(threads);
         let kick_claims = Claims::new(nkp, KICK_SPLIT, threads);
         let chunk_claims = Claims::new(nch, 1, threads);
+        let prune_claims = Claims::new(nch, 1, threads);
         // per thread its drift of the pass, per chunk its report (each written by one thread
         // in a pass, read by all after the barrier); two sets, by the parity of the step: a
         // fused step has no barrier between reading one step's and writing the next one's (a
@@ -339,7 +362,6 @@ where
         // once packed
         let fused = n >= self.fuse_from;
         let margin = self.fuse_margin;
-        let reach: &[u32] = &nl.cross_reach;
         let next = AtomicUsize::new(0);
         let packed: Vec<AtomicUsize> = (0..nch).map(|_| AtomicUsize::new(0)).collect();
 
@@ -353,6 +375,9 @@ where
             // fused sweeps done (the same count on every thread: they decide alike)
             let mut fpass = 0usize;
             loop {
+                // SAFETY: no thread changes the lists until this view's last use (below)
+                let nl: &NeighborList = unsafe { &*pnl.get() };
+                let ncidx = nl.n_cross();
                 let tk = Instant::now();
                 let pass_no = 1 + done as usize;
                 let par = (done % 2) as usize;
@@ -392,7 +417,7 @@ where
                     pass.piece::<T>(r.start, o)
                 };
                 // chunk c's forces (pass 2), its report into outs[c]
-                let force_chunk = |c: usize, shared: &Shared<F, T, D>| {
+                let force_chunk = |c: usize, shared: &Shared<F, T, D>, nl: &NeighborList| {
                     let r = c * ch..((c + 1) * ch).min(n);
                     let (c0, c1) = (nl.cross_off[c] as usize, nl.cross_off[c + 1] as usize);
                     // SAFETY: each chunk is claimed once per pass; it writes its own range of
@@ -450,10 +475,10 @@ where
                         // the chunks whose records its cross pairs read, and whose pending
                         // pass reads its cross buffer (which its forces overwrite), packed;
                         // they were claimed before it, so they are packed or being packed
-                        for p in &packed[c + 1..=reach[c] as usize] {
+                        for p in &packed[c + 1..=nl.cross_reach[c] as usize] {
                             barrier.wait_for(|| p.load(Ordering::Acquire) == pass_no);
                         }
-                        force_chunk(c, &shared);
+                        force_chunk(c, &shared, nl);
                     }
                 } else {
                     for k in kick_claims.take(me, pass_no) {
@@ -482,11 +507,59 @@ where
                 track.inner_moved += dd;
                 track.frame_v = dr.next_frame();
                 let step = step0 + done;
-                if moved || prune || dom.check(step).is_err() || dom.rebuild_due(nl.skin) {
+                // a due prune is done here, unless the step was fused (its forces are then
+                // computed again outside) or it must rebuild
+                let prune_here = prune && in_team_prune && !fuse;
+                if moved
+                    || (prune && !prune_here)
+                    || dom.check(step).is_err()
+                    || dom.rebuild_due(nl.skin)
+                {
                     // (a fused sweep computed this step's forces with lists now out of
                     // date: they are computed again outside, from the records)
                     return (done, track, TeamExit::Outside { moved }, last);
                 }
+                let nl = if prune_here {
+                    // `Engine::prune` (same inner skin, same chunks), its chunks shared out
+                    let speed = super::list_speed(track.vmax2, dom.affine_rate(), nl.cut);
+                    let s_in = super::inner_skin_for(prune_steps, nl.skin, speed, dt);
+                    let shifts = image_shifts(&dom.h());
+                    // SAFETY: the records are only read until the next pass
+                    let xr = unsafe { pxr.slice(0..n) };
+                    for c in prune_claims.take(me, pass_no) {
+                        // SAFETY: chunk c is this thread's alone; nothing else in the lists
+                        // is written until the barrier
+                        unsafe { NeighborList::prune_part(pnl.get(), c, xr, &shifts, s_in) };
+                    }
+                    barrier.wait();
+                    // SAFETY: the chunks are done; read only until the next barrier
+                    let cross_needed: usize =
+                        unsafe { (*pnl.get()).inner.iter().map(|ic| ic.xj.len()).sum() };
+                    if cross_needed > cidx_cap {
+                        // (the cross index would move: the step's prune is done again outside,
+                        // from the same records, to the same chunks)
+                        barrier.wait();
+                        return (done, track, TeamExit::Outside { moved }, last);
+                    }
+                    barrier.wait();
+                    if me == 0 {
+                        // SAFETY: the other threads wait at the barrier holding no view
+                        unsafe {
+                            (*pnl.get()).prune_finish(s_in);
+                            pruned.fetch_add(1, Ordering::Relaxed);
+                            let ci = &mut *pcidx_vec.get();
+                            ci.clear();
+                            ci.resize(cross_needed, u32::MAX);
+                            debug_assert_eq!(ci.as_mut_ptr(), pcidx.0);
+                        }
+                    }
+                    barrier.wait();
+                    track.inner_moved = 0.0;
+                    // SAFETY: no thread changes the lists again in this step
+                    unsafe { &*pnl.get() }
+                } else {
+                    nl
+                };
                 let tf = Instant::now();
                 if !fuse {
                     // pass 2: forces, chunk by chunk
@@ -494,7 +567,7 @@ where
                     let recs = unsafe { (pxr.slice(0..n), pkin.slice(0..n), mass) };
                     let shared = Shared::new(law, dom, walls, body, nl, recs, dt, ch);
                     for c in chunk_claims.take(me, pass_no) {
-                        force_chunk(c, &shared);
+                        force_chunk(c, &shared, nl);
                     }
                     barrier.wait();
                 }
@@ -532,6 +605,7 @@ where
 
         // every thread ended at the same step for the same reason; the first one's account
         let (done, track, exit, last) = results.into_iter().next().expect("a team of one or more");
+        self.team_prunes += pruned.into_inner() as u64;
         if done % 2 == 1 {
             std::mem::swap(&mut self.hist, &mut self.hist_next);
             std::mem::swap(&mut self.whist, &mut self.whist_next);
