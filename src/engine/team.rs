@@ -605,7 +605,12 @@ where
 
         // every thread ended at the same step for the same reason; the first one's account
         let (done, track, exit, last) = results.into_iter().next().expect("a team of one or more");
-        self.team_prunes += pruned.into_inner() as u64;
+        let pruned = pruned.into_inner() as u64;
+        self.team_prunes += pruned;
+        if pruned > 0 && self.trim() > RELEASE_BYTES {
+            // (as `Engine::prune` does: the contact lists grow by doubling in the sweeps)
+            release_free_memory();
+        }
         if done % 2 == 1 {
             std::mem::swap(&mut self.hist, &mut self.hist_next);
             std::mem::swap(&mut self.whist, &mut self.whist_next);
