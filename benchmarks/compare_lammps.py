@@ -601,7 +601,8 @@ def _shear_speed(a: argparse.Namespace, core: Any, st: dict[str, Any],
     steady state at 1 and 2 threads, LAMMPS's ``fix deform`` on the packing handed over (serial,
     2 OpenMP threads, 2 MPI ranks), ``--shear-speed-steps`` each, ``--repeat`` interleaved
     rounds (``_timed_rounds``). Not like for like in granflow's disfavour: the cell integrates
-    the Parrinello-Rahman cell dynamics (virial and kinetic stress every step), LAMMPS a prescribed deformation."""
+    the Parrinello-Rahman cell dynamics (virial and kinetic stress every step), LAMMPS a
+    prescribed deformation."""
     steps = a.shear_speed_steps
     params = {**params, "thermo_every": steps}
     params.pop("extra", None)
