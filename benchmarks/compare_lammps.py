@@ -643,12 +643,20 @@ def _timed_rounds(configs: list[tuple[str, str, Any]], repeat: int) -> list[dict
     core's by up to 40 %) over minutes, and interleaving spreads a slow spell over all
     configurations instead of charging it to whichever ran then. Each row keeps every
     round's rate (``rates``) and its best (``rate``)."""
+    from granflow import _core
+
     rates: list[list[float]] = [[] for _ in configs]
+    # the cores' cache-line round trip just before each run (`granflow.probe`): 3-4x higher
+    # when the VM's two cores are placed far apart, and two threads then run far slower
+    # (NOTES.md, eighth session)
+    trips: list[list[float]] = [[] for _ in configs]
     for _ in range(repeat):
         for k, (_, _, fn) in enumerate(configs):
+            trips[k].append(_core.core_round_trip_ns(100_000))
             rates[k].append(float(fn()))
-    return [{"code": c, "mode": m, "rate": max(r), "median": float(np.median(r)), "rates": r}
-            for (c, m, _), r in zip(configs, rates, strict=True)]
+    return [{"code": c, "mode": m, "rate": max(r), "median": float(np.median(r)), "rates": r,
+             "round_trip_ns": t}
+            for (c, m, _), r, t in zip(configs, rates, trips, strict=True)]
 
 
 def _speed_table(title: str, rows: list[dict[str, Any]], gf1: str,
@@ -679,6 +687,10 @@ def _speed_table(title: str, rows: list[dict[str, Any]], gf1: str,
     for r in rows:
         each = " ".join(f"{x:.3e}" for x in r["rates"])
         print(f"{r['code']:>9} {r['mode']:>28} {r['rate']:>11.3e} {r['median']:>11.3e}   {each}")
+    print("cross-core round trip before each run, ns (3-4x higher when the cores are far apart):")
+    for r in rows:
+        each = " ".join(f"{x:9.0f}" for x in r["round_trip_ns"])
+        print(f"{r['code']:>9} {r['mode']:>28} {'':>23}   {each}")
     print(f"{'ratio':>20} {'of best':>8} {'median of rounds':>17}")
     for k, v in ratios.items():
         print(f"{k:>20} {v:8.2f} {per_round[k]:17.2f}")

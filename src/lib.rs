@@ -19,6 +19,7 @@ pub mod lanes;
 pub mod neighbor;
 pub mod particles;
 pub mod prcell;
+pub mod probe;
 pub mod rng;
 pub mod sim;
 pub mod table;

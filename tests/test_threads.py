@@ -12,6 +12,7 @@ import threading
 
 import granflow as gf
 import numpy as np
+import pytest
 
 
 def _walled(threads: int) -> gf.Simulation:
@@ -109,3 +110,15 @@ def test_sheared_cell_one_and_two_threads_same_bits() -> None:
         runs.append((core.positions(), core.velocities(), np.asarray(core.cell()[0])))
     for u, w in zip(*runs, strict=True):
         assert np.array_equal(u, w)
+
+
+def test_core_round_trip_probe() -> None:
+    # the benchmarks' machine probe: a positive, finite time; a bad count is a granflow error
+    import math
+
+    from granflow import _core
+
+    t = _core.core_round_trip_ns(2000)
+    assert math.isfinite(t) and t > 0.0
+    with pytest.raises(gf.ParameterError, match="iters"):
+        _core.core_round_trip_ns(0)

@@ -11,6 +11,18 @@ mod build;
 mod errors;
 mod sim;
 
+/// Mean round trip in nanoseconds of a value bounced `iters` times between two threads
+/// through one cache line (`granflow::probe`), with the GIL released: benchmarks record it to
+/// tell a VM's near and far placements of its cores apart.
+#[pyfunction]
+#[pyo3(signature = (iters = 200_000))]
+fn core_round_trip_ns(py: Python<'_>, iters: i64) -> PyResult<f64> {
+    if !(2..=1_000_000_000).contains(&iters) {
+        return Err(errors::param_err("iters", iters, "2 <= iters <= 1e9"));
+    }
+    Ok(py.detach(|| granflow::probe::core_round_trip_ns(iters as u64)))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
@@ -18,6 +30,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<arrow::ArrowBatch>()?;
     build::register(m)?;
     m.add_function(wrap_pyfunction!(sim::read_checkpoint_header, m)?)?;
+    m.add_function(wrap_pyfunction!(core_round_trip_ns, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
