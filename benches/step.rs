@@ -5,8 +5,8 @@
 //! pairs), periodic y and z, gravity -1 along y (000's channel). `benchmarks/kernel_state.py`
 //! writes such files.
 //! Knobs (environment): PRUNE=k prune interval, FUSE=n fused sweep from n particles,
-//! NO_TEAM=1 steps through rayon only, NO_PRUNE_TEAM=1 prunes outside the team, PAD=b allocate b bytes first (shifts the heap layout),
-//! PIN=1 pins worker i to CPU i.
+//! NO_TEAM=1 steps through rayon only, NO_PRUNE_TEAM=1 prunes outside the team,
+//! PAD=b allocate b bytes first (shifts the heap layout), PIN=1 pins worker i to CPU i.
 use granflow::contact::{Coulomb, Form, Friction, Frictionless, Hooke, LawParams};
 use granflow::domain::OrthoBox;
 use granflow::engine::{Body, Engine, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
@@ -134,11 +134,8 @@ fn main() {
         .num_threads(threads)
         .start_handler(|i| {
             if std::env::var_os("PIN").is_some() {
-                extern "C" {
-                    fn sched_setaffinity(pid: i32, size: usize, mask: *const u64) -> i32;
-                }
-                let m: u64 = 1 << i;
-                unsafe { sched_setaffinity(0, 8, &m) };
+                // pinned for the worker's life: the guard is not dropped
+                std::mem::forget(granflow::probe::pin::to(i));
             }
         })
         .build()

@@ -285,8 +285,8 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Prunes due inside a team stint are done by the team (each thread its chunks) instead
     /// of ending the stint (on by default; the same results either way).
     pub prune_in_team: bool,
-    /// Prunes done inside team stints (a count for tests and benchmarks).
-    pub team_prunes: u64,
+    /// Prunes done inside team stints (a count for the tests).
+    pub(crate) team_prunes: u64,
     /// Room kept in the cross index for a prune inside a team (None: an eighth more, +64;
     /// Some(k): the index shrunk, then k more: for tests of the fallback, where a prune that
     /// needs more is done outside).

@@ -437,10 +437,7 @@ impl NeighborList {
         self.inner.resize_with(nchunks, InnerChunk::default);
         let (own_start, pair_j, pair_img) = (&self.own_start, &self.pair_j, &self.pair_img);
         self.inner.par_iter_mut().enumerate().for_each(|(c, ic)| {
-            let (i0, i1) = (c * ch, ((c + 1) * ch).min(n));
-            prune_chunk(
-                ic, i0, i1, own_start, pair_j, pair_img, xr, shifts, inner_skin,
-            );
+            prune_chunk(ic, c, own_start, pair_j, pair_img, xr, shifts, inner_skin);
         });
         self.prune_finish(inner_skin);
     }
@@ -462,16 +459,12 @@ impl NeighborList {
         // SAFETY (caller): shared views of fields no one writes, and chunk c alone
         unsafe {
             let nl = &*this;
-            let n = nl.own_start.len() - 1;
-            let ch = chunk_size(n);
             assert!(c < nl.inner.len());
             // (`as_ptr` takes no reference to the other chunks)
             let ic = &mut *(nl.inner.as_ptr() as *mut InnerChunk).add(c);
-            let (i0, i1) = (c * ch, ((c + 1) * ch).min(n));
             prune_chunk(
                 ic,
-                i0,
-                i1,
+                c,
                 &nl.own_start,
                 &nl.pair_j,
                 &nl.pair_img,
@@ -548,8 +541,7 @@ impl NeighborList {
 #[allow(clippy::too_many_arguments)]
 fn prune_chunk(
     ic: &mut InnerChunk,
-    i0: usize,
-    i1: usize,
+    c: usize,
     own_start: &[u32],
     pair_j: &[u32],
     pair_img: &[u8],
@@ -557,6 +549,9 @@ fn prune_chunk(
     shifts: &[[f64; 4]; 27],
     inner_skin: f64,
 ) {
+    let n = own_start.len() - 1;
+    let ch = chunk_size(n);
+    let (i0, i1) = (c * ch, ((c + 1) * ch).min(n));
     let (kb, ke) = (own_start[i0] as usize, own_start[i1] as usize);
     let m = ke - kb;
     ic.base = kb as u32;

@@ -26,9 +26,10 @@ fn wait_for(line: &Line, v: u64) {
     }
 }
 
-/// The CPUs this thread may run on (Linux), and a guard that restores them.
+/// Pinning the calling thread to one CPU (Linux), with a guard that restores its CPU set.
 #[cfg(target_os = "linux")]
-mod pin {
+pub mod pin {
+    /// Restores the thread's CPU set when dropped.
     pub struct Restore(libc::cpu_set_t);
 
     fn current() -> Option<libc::cpu_set_t> {

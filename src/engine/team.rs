@@ -537,8 +537,8 @@ where
                         unsafe { (*pnl.get()).inner.iter().map(|ic| ic.xj.len()).sum() };
                     if cross_needed > cidx_cap {
                         // (the cross index would move: the step's prune is done again outside,
-                        // from the same records, to the same chunks)
-                        barrier.wait();
+                        // from the same records, to the same chunks; no thread writes the
+                        // lists before then)
                         return (done, track, TeamExit::Outside { moved }, last);
                     }
                     barrier.wait();
