@@ -1466,7 +1466,11 @@ fn cross_kick_chunk<const STATS: bool, T: Friction>(k: CrossChunk, aff: AffineFi
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn cross_kick_avx2<const STATS: bool, T: Friction>(k: CrossChunk, aff: AffineFinal) -> M3 {
-    cross_kick::<STATS, T>(k, aff)
+    match aff {
+        // SAFETY: this function only runs on AVX2 CPUs
+        Some((m, mass)) if !STATS => unsafe { wide::cross_kick_affine::<T>(k, m, mass) },
+        _ => cross_kick::<STATS, T>(k, aff),
+    }
 }
 
 /// The loop of phase 2 over one chunk. With `aff` (a deforming cell in a step, `s.kick` =
@@ -1722,8 +1726,10 @@ fn kdp_avx2<T: Friction>(k: KickChunk) -> Drift {
 /// fourth lane zero): the same IEEE operations in the same order, so the same bits.
 #[cfg(target_arch = "x86_64")]
 mod wide {
-    use super::{CrossSrc, Drift, KickChunk, KickOut, PairOut};
+    use super::{AffineKick, CrossChunk, CrossSrc, Drift, KickChunk, KickOut, PairOut};
     use crate::contact::Friction;
+    use crate::domain::StepMaps;
+    use crate::M3;
     use crate::V3;
     use std::arch::x86_64::*;
 
@@ -1759,10 +1765,12 @@ mod wide {
 
     /// The cross pairs in contact of particle l added onto (f, t) (`super::cross_sum`).
     ///
+    /// Without `target_feature` of its own so that it can be `inline(always)`: it is only
+    /// called from AVX2 functions, into which it is inlined.
+    ///
     /// # Safety
     /// AVX2; l < the chunk's length, l + 1 < s.cs.len().
-    #[inline]
-    #[target_feature(enable = "avx2")]
+    #[inline(always)]
     unsafe fn cross_sum<T: Friction>(l: usize, f: &mut __m256d, t: &mut __m256d, s: &CrossSrc) {
         unsafe {
             let (a, b) = (
@@ -1885,6 +1893,179 @@ mod wide {
             hi: [h0, h1, h2],
         }
     }
+
+    /// A 3x3 matrix's columns, each in lanes 0-2.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn cols(m: &M3) -> [__m256d; 3] {
+        let p = m.as_slice().as_ptr();
+        // SAFETY: a column-major 3x3 matrix is 9 contiguous doubles
+        unsafe { [ld3(p), ld3(p.add(3)), ld3(p.add(6))] }
+    }
+
+    /// m v with m given by its columns: per row ((m0 v0 + m1 v1) + m2 v2), nalgebra's order.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn mv(c: &[__m256d; 3], v: __m256d) -> __m256d {
+        let [a, b, d] = splat3(v);
+        let s = _mm256_add_pd(_mm256_mul_pd(c[0], a), _mm256_mul_pd(c[1], b));
+        _mm256_add_pd(s, _mm256_mul_pd(c[2], d))
+    }
+
+    /// Lanes 0, 1 and 2 of `v`, each broadcast to a whole register (in registers: no trip
+    /// through memory as `lanes` takes).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn splat3(v: __m256d) -> [__m256d; 3] {
+        [
+            _mm256_permute4x64_pd::<0x00>(v),
+            _mm256_permute4x64_pd::<0x55>(v),
+            _mm256_permute4x64_pd::<0xAA>(v),
+        ]
+    }
+
+    /// v0 v0 + v1 v1 + v2 v2 in that order (lane 0), as nalgebra's `norm_squared`.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn norm2(v: __m256d) -> __m128d {
+        let q = _mm256_mul_pd(v, v);
+        let lo = _mm256_castpd256_pd128(q);
+        let s = _mm_add_sd(lo, _mm_unpackhi_pd(lo, lo));
+        _mm_add_sd(s, _mm256_extractf128_pd::<1>(q))
+    }
+
+    /// `StepMaps::kick`: v + h2 (f/m - L v - tr v), the same operations in the same order.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn kick(
+        lc: &[__m256d; 3],
+        tr: __m256d,
+        h2: __m256d,
+        v: __m256d,
+        f: __m256d,
+        im: f64,
+    ) -> __m256d {
+        let a = _mm256_sub_pd(_mm256_mul_pd(f, _mm256_set1_pd(im)), mv(lc, v));
+        let a = _mm256_sub_pd(a, _mm256_mul_pd(tr, v));
+        _mm256_add_pd(v, _mm256_mul_pd(h2, a))
+    }
+
+    /// `super::affine_kick_pack` with each 3-vector in the low lanes of one register: the
+    /// same IEEE operations in the same order, so the same bits.
+    ///
+    /// # Safety
+    /// AVX2 CPU.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn akp<T: Friction>(k: AffineKick) -> f64 {
+        let AffineKick {
+            out: (x, v, w, a, b),
+            src: (f, t, im, ii, rad),
+            m,
+            dt,
+        } = k;
+        let n = x.len();
+        assert!(v.len() == n && w.len() == n && a.len() == n && b.len() == n);
+        assert!(f.len() >= n && t.len() >= n && im.len() >= n && ii.len() >= n);
+        assert!(rad.len() >= n);
+        let h2 = 0.5 * dt;
+        let (lc, ac) = (cols(&m.l), cols(&m.a));
+        let (vtr, vh2, vdt) = (_mm256_set1_pd(m.tr), _mm256_set1_pd(h2), _mm256_set1_pd(dt));
+        let cptr = |q: &[V3]| q.as_ptr() as *const f64;
+        let ptr = |q: &mut [V3]| q.as_mut_ptr() as *mut f64;
+        let (px, pv, pw) = (ptr(x), ptr(v), ptr(w));
+        let (pf, pt) = (cptr(f), cptr(t));
+        let mut vm = _mm_setzero_pd();
+        for l in 0..n {
+            // SAFETY: l < n, the length of every slice (asserted above); a 3-vector is 3
+            // doubles at 3 l
+            unsafe {
+                let o = 3 * l;
+                let (fl, tl, vl) = (ld3(pf.add(o)), ld3(pt.add(o)), ld3(pv.add(o)));
+                let (iml, iil, rl) = (
+                    *im.get_unchecked(l),
+                    *ii.get_unchecked(l),
+                    *rad.get_unchecked(l),
+                );
+                let vn = kick(&lc, vtr, vh2, vl, fl, iml);
+                st3(pv.add(o), vn);
+                // without friction there are no torques: spins never change
+                let wn = if T::FRICTIONAL {
+                    let wn =
+                        _mm256_add_pd(ld3(pw.add(o)), _mm256_mul_pd(_mm256_set1_pd(h2 * iil), tl));
+                    st3(pw.add(o), wn);
+                    wn
+                } else {
+                    ld3(pw.add(o))
+                };
+                let xn = _mm256_add_pd(mv(&ac, ld3(px.add(o))), _mm256_mul_pd(vdt, vn));
+                st3(px.add(o), xn);
+                // maxsd(new, acc) keeps acc for a NaN, as f64::max does
+                vm = _mm_max_sd(norm2(vn), vm);
+                let xr = _mm256_blend_pd::<0b1000>(xn, _mm256_set1_pd(rl));
+                _mm256_storeu_pd(a.get_unchecked_mut(l).as_mut_ptr(), xr);
+                // kin_record's arithmetic
+                let vp = _mm256_add_pd(vn, _mm256_mul_pd(_mm256_set1_pd(h2 * iml), fl));
+                let wp = _mm256_add_pd(wn, _mm256_mul_pd(_mm256_set1_pd(h2 * iil), tl));
+                let kb = b.get_unchecked_mut(l).as_mut_ptr();
+                _mm256_storeu_pd(kb, _mm256_blend_pd::<0b1000>(vp, _mm256_set1_pd(iml)));
+                _mm256_storeu_pd(kb.add(4), _mm256_blend_pd::<0b1000>(wp, _mm256_set1_pd(rl)));
+            }
+        }
+        _mm_cvtsd_f64(vm)
+    }
+
+    /// `super::cross_kick` of a deforming cell in a step, without statistics: the cross
+    /// pairs, the cell's final half-kick and the chunk's kinetic sum sum_l m v v^T (per
+    /// element (m v_r) v_c, as nalgebra's outer product), the same bits.
+    ///
+    /// # Safety
+    /// AVX2 CPU.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn cross_kick_affine<T: Friction>(
+        k: CrossChunk,
+        m: &StepMaps,
+        mass: &[f64],
+    ) -> M3 {
+        let CrossChunk {
+            fo, to, vo, wo, s, ..
+        } = k;
+        let n = fo.len();
+        assert!(to.len() == n && vo.len() == n && wo.len() == n && s.cs.len() == n + 1);
+        assert!(s.rad.len() == n && s.im.len() == n && s.ii.len() == n && mass.len() == n);
+        let h2 = s.kick;
+        let lc = cols(&m.l);
+        let (vtr, vh2) = (_mm256_set1_pd(m.tr), _mm256_set1_pd(h2));
+        let ptr = |q: &mut [V3]| q.as_mut_ptr() as *mut f64;
+        let (pf, pt, pv, pw) = (ptr(fo), ptr(to), ptr(vo), ptr(wo));
+        let mut kc = [_mm256_setzero_pd(); 3];
+        for l in 0..n {
+            // SAFETY: l < n, the length of every per-particle slice (asserted above)
+            unsafe {
+                let o = 3 * l;
+                let (mut f, mut t) = (ld3(pf.add(o)), ld3(pt.add(o)));
+                cross_sum::<T>(l, &mut f, &mut t, s);
+                st3(pf.add(o), f);
+                st3(pt.add(o), t);
+                let vn = kick(&lc, vtr, vh2, ld3(pv.add(o)), f, *s.im.get_unchecked(l));
+                st3(pv.add(o), vn);
+                if T::FRICTIONAL {
+                    let k = _mm256_set1_pd(h2 * *s.ii.get_unchecked(l));
+                    st3(
+                        pw.add(o),
+                        _mm256_add_pd(ld3(pw.add(o)), _mm256_mul_pd(k, t)),
+                    );
+                }
+                let mv = _mm256_mul_pd(_mm256_set1_pd(*mass.get_unchecked(l)), vn);
+                let [a, b, c] = splat3(vn);
+                kc[0] = _mm256_add_pd(kc[0], _mm256_mul_pd(mv, a));
+                kc[1] = _mm256_add_pd(kc[1], _mm256_mul_pd(mv, b));
+                kc[2] = _mm256_add_pd(kc[2], _mm256_mul_pd(mv, c));
+            }
+        }
+        let ([a0, a1, a2, _], [b0, b1, b2, _], [c0, c1, c2, _]) =
+            (lanes(kc[0]), lanes(kc[1]), lanes(kc[2]));
+        M3::new(a0, b0, c0, a1, b1, c1, a2, b2, c2)
+    }
 }
 
 #[inline(always)]
@@ -1977,7 +2158,8 @@ struct AffineKick<'a, 'b> {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn affine_kick_pack_avx2<T: Friction>(k: AffineKick) -> f64 {
-    affine_kick_pack::<T>(k)
+    // SAFETY: this function only runs on AVX2 CPUs
+    unsafe { wide::akp::<T>(k) }
 }
 
 /// The loop of `Engine::kick_drift_pack_affine` over one chunk; returns the largest squared
