@@ -58,6 +58,11 @@ pub trait Domain: Clone + Send + Sync + 'static {
     fn streaming_velocity(&self, _rij: &V3) -> V3 {
         V3::zeros()
     }
+    /// `streaming_velocity` as (P, w): L r = (P r) / w, for the force loop to apply on lanes
+    /// of contacts (the same operations in the same order).
+    fn streaming_map(&self) -> (crate::M3, f64) {
+        (crate::M3::zeros(), 1.0)
+    }
     fn periodic(&self) -> [bool; 3];
     /// Minimum-image displacement x_i - x_j.
     fn delta(&self, xi: &V3, xj: &V3) -> V3;

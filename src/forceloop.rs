@@ -426,6 +426,17 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
         hnew.vals.reserve(nc);
     }
     let hv0 = hnew.vals.as_mut_ptr().wrapping_add(hnew.vals.len());
+    let (pg, wg) = s.dom.streaming_map();
+    // the virial's columns (lane 3 unused), so that a contact's r (x) f is three packed
+    // multiply-adds: per element vir_rc + d_r f_c, the operations of `vir += d * f^T`
+    let mut vc = [[0.0f64; 4]; 3];
+    if VIR {
+        for (c, col) in vc.iter_mut().enumerate() {
+            for (x, v) in col.iter_mut().zip(o.out.vir.column(c).iter()) {
+                *x = *v;
+            }
+        }
+    }
     let mut b = 0;
     while b < nc {
         // a short last group repeats its last contact (results not used)
@@ -479,14 +490,17 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             }
         }
         if D::STREAMING {
-            for l in 0..L {
-                let sv = s
-                    .dom
-                    .streaming_velocity(&V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]));
-                p.sv.x.0[l] = sv.x;
-                p.sv.y.0[l] = sv.y;
-                p.sv.z.0[l] = sv.z;
-            }
+            // Domain::streaming_velocity on the lanes: per row ((P0 dx + P1 dy) + P2 dz) / w,
+            // nalgebra's order (the same bits)
+            let row = |r: usize| {
+                let c = |k: usize| Ln::<L>::splat(pg[(r, k)]);
+                (c(0) * p.d.x + c(1) * p.d.y + c(2) * p.d.z) / Ln::splat(wg)
+            };
+            p.sv = V {
+                x: row(0),
+                y: row(1),
+                z: row(2),
+            };
         }
         let r = s.law.eval_pairs::<L>(&p, s.dt, D::STREAMING);
         for l in 0..m {
@@ -529,29 +543,39 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
                 o.out.max_ov = ov;
                 o.out.at = (i, j);
             }
-            if VIR || STATS {
-                let d = V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]);
-                if VIR {
-                    o.out.vir += d * f.transpose();
+            if VIR {
+                let d = [p.d.x.0[l], p.d.y.0[l], p.d.z.0[l], 0.0];
+                for (col, fc) in vc.iter_mut().zip([f.x, f.y, f.z]) {
+                    for r in 0..4 {
+                        col[r] += d[r] * fc;
+                    }
                 }
-                if STATS {
-                    let vrel = V3::new(r.vrel.x.0[l], r.vrel.y.0[l], r.vrel.z.0[l]);
-                    let half = 0.5 * d * f.transpose();
-                    let mut rec = [0.0; 10];
-                    for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
-                        *a = *b;
-                    }
-                    rec[9] = 0.5 * f.dot(&vrel);
-                    add10(&mut o.ps[li], &rec);
-                    if is_cross {
-                        o.cstat.push(rec);
-                    } else {
-                        add10(&mut o.ps[j - o.i0], &rec);
-                    }
+            }
+            if STATS {
+                let d = V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]);
+                let vrel = V3::new(r.vrel.x.0[l], r.vrel.y.0[l], r.vrel.z.0[l]);
+                let half = 0.5 * d * f.transpose();
+                let mut rec = [0.0; 10];
+                for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
+                    *a = *b;
+                }
+                rec[9] = 0.5 * f.dot(&vrel);
+                add10(&mut o.ps[li], &rec);
+                if is_cross {
+                    o.cstat.push(rec);
+                } else {
+                    add10(&mut o.ps[j - o.i0], &rec);
                 }
             }
         }
         b += L;
+    }
+    if VIR {
+        for (c, col) in vc.iter().enumerate() {
+            for (v, x) in o.out.vir.column_mut(c).iter_mut().zip(col) {
+                *v = *x;
+            }
+        }
     }
     if T::FRICTIONAL {
         hnew.keys.extend(sc.ids[..nc].iter().map(|e| e[2]));

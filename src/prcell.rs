@@ -201,6 +201,9 @@ impl Domain for PrCell {
     fn streaming_velocity(&self, rij: &V3) -> V3 {
         (self.pg * rij) / self.wg
     }
+    fn streaming_map(&self) -> (M3, f64) {
+        (self.pg, self.wg)
+    }
     #[inline(always)]
     fn delta(&self, xi: &V3, xj: &V3) -> V3 {
         let mut s = self.h_inv * (xi - xj);
