@@ -503,6 +503,19 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             };
         }
         let r = s.law.eval_pairs::<L>(&p, s.dt, D::STREAMING);
+        if VIR {
+            // a loop of its own, so that the columns stay in registers across the group
+            let mut cols = vc;
+            for l in 0..m {
+                let d = [p.d.x.0[l], p.d.y.0[l], p.d.z.0[l], 0.0];
+                for (col, fc) in cols.iter_mut().zip([r.f.x.0[l], r.f.y.0[l], r.f.z.0[l]]) {
+                    for k in 0..4 {
+                        col[k] += d[k] * fc;
+                    }
+                }
+            }
+            vc = cols;
+        }
         for l in 0..m {
             let c = b + l;
             if T::FRICTIONAL {
@@ -542,14 +555,6 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             if ov > o.out.max_ov {
                 o.out.max_ov = ov;
                 o.out.at = (i, j);
-            }
-            if VIR {
-                let d = [p.d.x.0[l], p.d.y.0[l], p.d.z.0[l], 0.0];
-                for (col, fc) in vc.iter_mut().zip([f.x, f.y, f.z]) {
-                    for r in 0..4 {
-                        col[r] += d[r] * fc;
-                    }
-                }
             }
             if STATS {
                 let d = V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]);
