@@ -1,7 +1,7 @@
 """Scaling with N on the channel workload: particle-steps per second (1 and 2 threads) and
 resident bytes per particle at N ~ 5e3, 2e4, 1e5, 1e6.
 
-    python benchmarks/scaling.py [--max-n 1000000] [--budget 1e8] [--threads 1 2]
+    python benchmarks/scaling.py [--max-n 1000000] [--budget 1e8] [--threads 1 2] [--lammps]
 
 The flowing channel state of compare_lammps.py (W = 20, H = 30, B = 10 d, 6754 particles,
 kn = 1e6, e_n = 0.82, mu = 0.5, dt = 1.2e-4, skin 0.2; cached in benchmarks/out/) is tiled, so
@@ -26,6 +26,7 @@ import json
 import math
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -52,24 +53,54 @@ def tiling(n_target: int, n0: int) -> tuple[int, int]:
     return max(close, key=lambda t: t[0])
 
 
-def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
-        grow: str) -> dict[str, Any]:
-    """Build and time one size (run in a child process)."""
-    import granflow as gf
-
+def tiled(n_target: int, flow_steps: int, grow: str) -> dict[str, Any]:
+    """The cached channel state tiled to about ``n_target`` particles (a state dict as
+    ``compare_lammps.channel_state`` returns, plus ``copies``)."""
     st = cl.channel_state(flow_steps)
     n0 = len(st["x"])
     ta, tb = tiling(n_target, n0)
     nx, ny, nz = (ta, tb, 1) if grow == "WH" else (1, ta, tb)
     shift = np.array([[i * cl.W, j * cl.H, k * cl.B] for i in range(nx) for j in range(ny)
                       for k in range(nz)])
-    x = (st["x"][None, :, :] + shift[:, None, :]).reshape(-1, 3)
     rep = len(shift)
-    v = np.tile(st["v"], (rep, 1))
-    w = np.tile(st["omega"], (rep, 1))
-    d = np.tile(st["d"], rep)
+    width = nx * cl.W
+    return {
+        **st, "x": (st["x"][None, :, :] + shift[:, None, :]).reshape(-1, 3),
+        "v": np.tile(st["v"], (rep, 1)), "omega": np.tile(st["omega"], (rep, 1)),
+        "d": np.tile(st["d"], rep), "hi": np.array([width, ny * cl.H, nz * cl.B]),
+        "walls": [(0.0, 1.0), (width, -1.0)], "copies": [nx, ny, nz],
+    }  # fmt: skip
+
+
+def steps_for(budget: float, n: int) -> int:
+    return int(min(2000, max(100, budget / n)))
+
+
+def lammps_rate(n_target: int, budget: float, flow_steps: int, grow: str,
+                wd: Path) -> float:
+    """LAMMPS serial on the same tiled state, the same steps as granflow (Loop time)."""
+    import lammps_peer as lp
+
+    st = tiled(n_target, flow_steps, grow)
+    n = len(st["d"])
+    steps = steps_for(budget, n)
+    path = cl.data_file(st, wd / f"tiled_{n}.data")
+    gn = cl.gamma_n_workload(st["d"])
+    r = lp.run(path, cl.lmp_params(gn, thermo_every=steps), steps, mode="serial", threads=1,
+               scene="channel")
+    return float(r["particle_steps_per_s"])
+
+
+def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
+        grow: str) -> dict[str, Any]:
+    """Build and time one size (run in a child process)."""
+    import granflow as gf
+
+    st = tiled(n_target, flow_steps, grow)
+    x, v, w, d = st["x"], st["v"], st["omega"], st["d"]
+    nx, ny, nz = st["copies"]
     n = len(d)
-    width, height, depth = nx * cl.W, ny * cl.H, nz * cl.B
+    width, height, depth = st["hi"]
     law = gf.ContactLaw(kn=cl.KN, e_n=cl.E_N, mu=cl.MU, kt=cl.KT, xi_t_ratio=0.5)
     rss0 = rss_bytes()
     t0 = time.perf_counter()
@@ -83,7 +114,7 @@ def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
     t_build = time.perf_counter() - t0
     rss1 = rss_bytes()
     mem = sim.memory()
-    steps = int(min(2000, max(100, budget / n)))
+    steps = steps_for(budget, n)
     rates = {}
     for t in threads:
         sim.set_threads(t)
@@ -113,6 +144,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="flow steps of the cached channel state (compare_lammps's default)")
     ap.add_argument("--grow", default="HB", choices=["HB", "WH"],
                     help="axes along which the small channel is tiled (see above)")
+    ap.add_argument("--lammps", action="store_true",
+                    help="also time LAMMPS serial on each tiled state (the peer's own scaling; "
+                         "needs benchmarks/lammps_env.sh sourced)")
     ap.add_argument("--one", type=float, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--out", default=str(OUT / "scaling.json"))
     a = ap.parse_args(argv)
@@ -127,8 +161,10 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     thr = " ".join(f"{f'{t} thr p-steps/s':>17}" for t in a.threads)
     print(f"tiled along {a.grow}")
+    lmp = f"{'LAMMPS serial':>14}" if a.lammps else ""
     print(f"{'N':>9} {'tiles':>8} {'steps':>5} {'build s':>7} {thr} {'kernel B/p':>10} "
-          f"{'RSS B/p':>8} {'contacts/p':>10}")
+          f"{'RSS B/p':>8} {'contacts/p':>10} {lmp}")
+    tmp = tempfile.TemporaryDirectory(prefix="scaling_")
     for n in a.sizes:
         if n > a.max_n:
             continue
@@ -141,11 +177,16 @@ def main(argv: list[str] | None = None) -> None:
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         rows.append(r)
         rates = " ".join(f"{r['particle_steps_per_s'][str(t)]:>17.3e}" for t in a.threads)
+        if a.lammps:
+            r["lammps_serial_particle_steps_per_s"] = lammps_rate(
+                int(n), a.budget, a.flow_steps, a.grow, Path(tmp.name))
+            lmp = f"{r['lammps_serial_particle_steps_per_s']:>14.3e}"
         tiles = "x".join(map(str, r["copies"]))
         print(f"{r['n']:>9} {tiles:>8} {r['steps']:>5} "
               f"{r['build_seconds']:>7.1f} {rates} {r['kernel_bytes_per_particle']:>10.0f} "
-              f"{r['rss_growth_bytes_per_particle']:>8.0f} {r['contacts_per_particle']:>10.2f}",
-              flush=True)
+              f"{r['rss_growth_bytes_per_particle']:>8.0f} {r['contacts_per_particle']:>10.2f} "
+              f"{lmp}", flush=True)
+    tmp.cleanup()
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(rows, indent=1))
