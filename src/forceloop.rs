@@ -18,7 +18,7 @@ use crate::engine::{Body, ChunkOut, PairOut, Plane, Walls, MAX_WALLS};
 use crate::history::{Cursor, HistList};
 use crate::lanes::{Ln, PairIn, V};
 use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
-use crate::V3;
+use crate::{M3, V3};
 use std::cell::RefCell;
 
 /// Particles per block: the block's contacts stay in L1.
@@ -386,6 +386,21 @@ struct Sums<'a, 'b> {
     out: &'b mut ChunkOut,
 }
 
+/// `Domain::streaming_velocity` (P r) / w on lanes of contacts: per row ((P0 dx + P1 dy) +
+/// P2 dz) / w, nalgebra's order, so the same bits as one contact at a time.
+#[inline(always)]
+fn streaming_on_lanes<const L: usize>(pg: &M3, wg: f64, d: &V<L>) -> V<L> {
+    let row = |r: usize| {
+        let c = |k: usize| Ln::<L>::splat(pg[(r, k)]);
+        (c(0) * d.x + c(1) * d.y + c(2) * d.z) / Ln::splat(wg)
+    };
+    V {
+        x: row(0),
+        y: row(1),
+        z: row(2),
+    }
+}
+
 /// Pass 2: the law on lanes of contacts, then each contact's force and torques onto its two
 /// particles (in-chunk partners in place, cross partners through the chunk's buffer), in
 /// list order: the order, and so the bits, of a one-pair-at-a-time loop.
@@ -490,17 +505,7 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             }
         }
         if D::STREAMING {
-            // Domain::streaming_velocity on the lanes: per row ((P0 dx + P1 dy) + P2 dz) / w,
-            // nalgebra's order (the same bits)
-            let row = |r: usize| {
-                let c = |k: usize| Ln::<L>::splat(pg[(r, k)]);
-                (c(0) * p.d.x + c(1) * p.d.y + c(2) * p.d.z) / Ln::splat(wg)
-            };
-            p.sv = V {
-                x: row(0),
-                y: row(1),
-                z: row(2),
-            };
+            p.sv = streaming_on_lanes(&pg, wg, &p.d);
         }
         let r = s.law.eval_pairs::<L>(&p, s.dt, D::STREAMING);
         if VIR {
@@ -1020,6 +1025,37 @@ mod avx {
                 p.wj.y = ln(wy);
                 p.wj.z = ln(wz);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn streaming_on_lanes_matches_the_domain_bitwise() {
+        use crate::prcell::PrCell;
+        let mut cell = PrCell::new(9.0, 400, 0.5, 20.0, 8.0).unwrap();
+        // a cell velocity gradient with every entry set, as in a sheared, breathing cell
+        cell.pg = M3::new(0.31, -1.7, 0.023, 2.9, -0.11, 0.77, -0.5, 1.3, 0.9) * 1e-3;
+        let (pg, wg) = cell.streaming_map();
+        let rs = [
+            V3::new(0.3, -1.1, 0.7),
+            V3::new(-2.13, 0.017, 1.9),
+            V3::new(1e-3, 3.3, -0.41),
+            V3::new(0.9, 0.9, -0.9),
+        ];
+        let lane = |k: usize| Ln([rs[0][k], rs[1][k], rs[2][k], rs[3][k]]);
+        let d = V {
+            x: lane(0),
+            y: lane(1),
+            z: lane(2),
+        };
+        let sv = streaming_on_lanes(&pg, wg, &d);
+        for (l, r) in rs.iter().enumerate() {
+            let one = cell.streaming_velocity(r);
+            assert_eq!([sv.x.0[l], sv.y.0[l], sv.z.0[l]], [one.x, one.y, one.z]);
         }
     }
 }

@@ -731,24 +731,52 @@ fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Ve
     )
 }
 
+/// Positions, velocities and the cell matrix of a stress-controlled cell compacting and
+/// shearing (its own AVX2 passes, the streaming velocity and the virial on lanes).
+fn sheared_cell_run() -> (Vec<V3>, Vec<V3>, crate::M3) {
+    use crate::domain::Domain;
+    use crate::prcell::PrCell;
+    let l = 9.0;
+    let p = gas(0.3, l, 23, SizeDist::Uniform(0.8, 1.2));
+    let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
+    let mut e: Engine<Hooke, Coulomb, PrCell, NoWalls, NoBody> = Engine::new(
+        p,
+        LawParams::new(1e4, 0.7, 0.5),
+        cell,
+        NoWalls,
+        NoBody,
+        None,
+        0.3,
+    )
+    .unwrap();
+    e.run(3000).unwrap();
+    assert!(e.diag.contacts > 50, "{}", e.diag.contacts);
+    (e.p.x.clone(), e.p.v.clone(), e.domain.h())
+}
+
 #[test]
 fn avx2_and_baseline_paths_bitwise_identical() {
     // The force loop runs with AVX2 where the CPU has it and with baseline x86-64 otherwise;
     // both must give the same bits (same IEEE operations, same order). One test only: the
     // switch is global, and a second test flipping it concurrently would blur the check.
     // Without AVX2 on this CPU both runs take the baseline path.
-    let wide = crate::lanes::wide();
-    crate::lanes::set_wide(false);
-    let a = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
-    crate::lanes::set_wide(true);
-    let b = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
-    crate::lanes::set_wide(wide);
     let same = |u: &[V3], v: &[V3]| {
         assert_eq!(u.len(), v.len());
         for (x, y) in u.iter().zip(v) {
             assert_eq!(x.as_slice(), y.as_slice());
         }
     };
+    let wide = crate::lanes::wide();
+    crate::lanes::set_wide(false);
+    let a = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
+    let ca = sheared_cell_run();
+    crate::lanes::set_wide(true);
+    let b = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
+    let cb = sheared_cell_run();
+    crate::lanes::set_wide(wide);
+    same(&ca.0, &cb.0);
+    same(&ca.1, &cb.1);
+    assert_eq!(ca.2.as_slice(), cb.2.as_slice());
     same(&a.0, &b.0);
     same(&a.1 .0, &b.1 .0);
     same(&a.1 .1, &b.1 .1);
