@@ -53,15 +53,17 @@ pub trait Domain: Clone + Send + Sync + 'static {
     /// the kicks with its own passes over the particles. A domain with dynamics of its own
     /// sets this to false and gives its maps (`begin_step` ...).
     const PLAIN_NVE: bool = true;
-    /// The streaming velocity difference L r_ij for a displacement r_ij (only if `STREAMING`).
-    #[inline(always)]
-    fn streaming_velocity(&self, _rij: &V3) -> V3 {
-        V3::zeros()
-    }
-    /// `streaming_velocity` as (P, w): L r = (P r) / w, for the force loop to apply on lanes
-    /// of contacts (the same operations in the same order).
+    /// The streaming velocity gradient as (P, w): L = P / w (only read if `STREAMING`; the
+    /// force loop applies it on lanes of contacts, `forceloop::streaming_on_lanes`).
     fn streaming_map(&self) -> (crate::M3, f64) {
         (crate::M3::zeros(), 1.0)
+    }
+    /// The streaming velocity difference L r_ij = (P r_ij) / w for a displacement r_ij (only
+    /// if `STREAMING`).
+    #[inline(always)]
+    fn streaming_velocity(&self, rij: &V3) -> V3 {
+        let (pg, wg) = self.streaming_map();
+        (pg * rij) / wg
     }
     fn periodic(&self) -> [bool; 3];
     /// Minimum-image displacement x_i - x_j.

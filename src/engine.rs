@@ -1871,9 +1871,6 @@ mod wide {
                     wl = _mm256_add_pd(wl, _mm256_mul_pd(tl, hi));
                     st3(pw.add(o), wl);
                 }
-                // (x, R)
-                let xr = _mm256_blend_pd::<0b1000>(xn, _mm256_set1_pd(rl));
-                _mm256_storeu_pd(a.get_unchecked_mut(l).as_mut_ptr(), xr);
                 // (v + h f/m, 1/m) and (w + h t/I, R): kin_record's arithmetic
                 let vp = _mm256_add_pd(vn, _mm256_mul_pd(hm, fl));
                 let wp = if T::FRICTIONAL {
@@ -1881,9 +1878,13 @@ mod wide {
                 } else {
                     wl
                 };
-                let kb = b.get_unchecked_mut(l).as_mut_ptr();
-                _mm256_storeu_pd(kb, _mm256_blend_pd::<0b1000>(vp, _mm256_set1_pd(iml)));
-                _mm256_storeu_pd(kb.add(4), _mm256_blend_pd::<0b1000>(wp, _mm256_set1_pd(rl)));
+                put_records(
+                    a.get_unchecked_mut(l),
+                    b.get_unchecked_mut(l),
+                    (xn, vp, wp),
+                    iml,
+                    rl,
+                );
             }
         }
         let ([l0, l1, l2, _], [h0, h1, h2, _]) = (lanes(vlo), lanes(vhi));
@@ -1891,6 +1892,30 @@ mod wide {
             m2: _mm_cvtsd_f64(vm),
             lo: [l0, l1, l2],
             hi: [h0, h1, h2],
+        }
+    }
+
+    /// The two step records of a particle: (x, R) and (v + h f/m, 1/m, w + h t/I, R), from
+    /// the predicted velocities `vp`, `wp` (`kin_record`'s arithmetic, done by the caller).
+    ///
+    /// # Safety
+    /// AVX2 CPU.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn put_records(
+        a: &mut [f64; 4],
+        b: &mut [f64; 8],
+        (xn, vp, wp): (__m256d, __m256d, __m256d),
+        im: f64,
+        r: f64,
+    ) {
+        let rr = _mm256_set1_pd(r);
+        // SAFETY: 4 and 8 doubles
+        unsafe {
+            _mm256_storeu_pd(a.as_mut_ptr(), _mm256_blend_pd::<0b1000>(xn, rr));
+            let kb = b.as_mut_ptr();
+            _mm256_storeu_pd(kb, _mm256_blend_pd::<0b1000>(vp, _mm256_set1_pd(im)));
+            _mm256_storeu_pd(kb.add(4), _mm256_blend_pd::<0b1000>(wp, rr));
         }
     }
 
@@ -1988,10 +2013,11 @@ mod wide {
                 );
                 let vn = kick(&lc, vtr, vh2, vl, fl, iml);
                 st3(pv.add(o), vn);
+                // h2/I: the spin's kick and its record
+                let hi = _mm256_set1_pd(h2 * iil);
                 // without friction there are no torques: spins never change
                 let wn = if T::FRICTIONAL {
-                    let wn =
-                        _mm256_add_pd(ld3(pw.add(o)), _mm256_mul_pd(_mm256_set1_pd(h2 * iil), tl));
+                    let wn = _mm256_add_pd(ld3(pw.add(o)), _mm256_mul_pd(hi, tl));
                     st3(pw.add(o), wn);
                     wn
                 } else {
@@ -2001,14 +2027,16 @@ mod wide {
                 st3(px.add(o), xn);
                 // maxsd(new, acc) keeps acc for a NaN, as f64::max does
                 vm = _mm_max_sd(norm2(vn), vm);
-                let xr = _mm256_blend_pd::<0b1000>(xn, _mm256_set1_pd(rl));
-                _mm256_storeu_pd(a.get_unchecked_mut(l).as_mut_ptr(), xr);
                 // kin_record's arithmetic
                 let vp = _mm256_add_pd(vn, _mm256_mul_pd(_mm256_set1_pd(h2 * iml), fl));
-                let wp = _mm256_add_pd(wn, _mm256_mul_pd(_mm256_set1_pd(h2 * iil), tl));
-                let kb = b.get_unchecked_mut(l).as_mut_ptr();
-                _mm256_storeu_pd(kb, _mm256_blend_pd::<0b1000>(vp, _mm256_set1_pd(iml)));
-                _mm256_storeu_pd(kb.add(4), _mm256_blend_pd::<0b1000>(wp, _mm256_set1_pd(rl)));
+                let wp = _mm256_add_pd(wn, _mm256_mul_pd(hi, tl));
+                put_records(
+                    a.get_unchecked_mut(l),
+                    b.get_unchecked_mut(l),
+                    (xn, vp, wp),
+                    iml,
+                    rl,
+                );
             }
         }
         _mm_cvtsd_f64(vm)

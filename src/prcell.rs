@@ -198,9 +198,6 @@ impl Domain for PrCell {
         [true; 3]
     }
     #[inline(always)]
-    fn streaming_velocity(&self, rij: &V3) -> V3 {
-        (self.pg * rij) / self.wg
-    }
     fn streaming_map(&self) -> (M3, f64) {
         (self.pg, self.wg)
     }
