@@ -161,9 +161,9 @@ def main(argv: list[str] | None = None) -> None:
     rows = []
     thr = " ".join(f"{f'{t} thr p-steps/s':>17}" for t in a.threads)
     print(f"tiled along {a.grow}")
-    lmp = f"{'LAMMPS serial':>14}" if a.lammps else ""
+    lmp_head = f"{'LAMMPS serial':>14}" if a.lammps else ""
     print(f"{'N':>9} {'tiles':>8} {'steps':>5} {'build s':>7} {thr} {'kernel B/p':>10} "
-          f"{'RSS B/p':>8} {'contacts/p':>10} {lmp}")
+          f"{'RSS B/p':>8} {'contacts/p':>10} {lmp_head}")
     tmp = tempfile.TemporaryDirectory(prefix="scaling_")
     for n in a.sizes:
         if n > a.max_n:
@@ -177,6 +177,7 @@ def main(argv: list[str] | None = None) -> None:
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         rows.append(r)
         rates = " ".join(f"{r['particle_steps_per_s'][str(t)]:>17.3e}" for t in a.threads)
+        lmp = ""
         if a.lammps:
             r["lammps_serial_particle_steps_per_s"] = lammps_rate(
                 int(n), a.budget, a.flow_steps, a.grow, Path(tmp.name))
