@@ -7,9 +7,10 @@
 //! Knobs (environment): PRUNE=k prune interval, FUSE=n fused sweep from n particles,
 //! NO_TEAM=1 steps through rayon only, NO_PRUNE_TEAM=1 prunes outside the team,
 //! PAD=b allocate b bytes first (shifts the heap layout), PIN=1 pins worker i to CPU i.
+use granflow::components::{Body, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
 use granflow::contact::{Coulomb, Form, Friction, Frictionless, Hooke, LawParams};
 use granflow::domain::OrthoBox;
-use granflow::engine::{Body, Engine, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
+use granflow::engine::Engine;
 use granflow::particles::Particles;
 use granflow::V3;
 use std::time::Instant;

@@ -8,17 +8,16 @@
 //! so a scene carries and executes only the parts it uses.
 
 pub mod checkpoint;
+pub mod components;
 pub mod contact;
 pub mod domain;
 pub mod engine;
 pub mod error;
-mod forceloop;
 pub mod history;
 pub mod insert;
 pub mod lanes;
 pub mod neighbor;
 pub mod particles;
-pub mod prcell;
 pub mod probe;
 pub mod rng;
 pub mod sim;

@@ -19,7 +19,7 @@ use crate::particles::Particles;
 use crate::{M3, V3};
 use rayon::prelude::*;
 
-/// Particles per block of the force loop (`crate::forceloop`): the inner list keeps the
+/// Particles per block of the force loop (`crate::engine`, its `chunk` module): the inner list keeps the
 /// offsets of its pairs per block.
 pub const BLOCK: usize = 32;
 

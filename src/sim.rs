@@ -2,9 +2,10 @@
 //! "a simulation" without naming its type parameters. The hot loop stays monomorphised: dynamic
 //! dispatch happens once per `run` call, never per particle or pair.
 
+use crate::components::{Body, Walls};
 use crate::contact::{Form, Friction};
 use crate::domain::Domain;
-use crate::engine::{Body, Engine, StepDiag, Walls};
+use crate::engine::{Engine, StepDiag};
 use crate::error::Result;
 use crate::particles::Particles;
 use crate::table::Table;
@@ -474,7 +475,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         if pairs.iter().any(|e| e.0 as usize >= n || e.1 as usize >= n)
             || walls
                 .iter()
-                .any(|e| e.0 as usize >= n || e.1 as usize >= crate::engine::MAX_WALLS)
+                .any(|e| e.0 as usize >= n || e.1 as usize >= crate::components::MAX_WALLS)
         {
             return Err(bad("contact history refers to unknown particles".into()));
         }

@@ -1,5 +1,6 @@
 //! Kernel validation against analytic cases (issue: core kernel). Run with `cargo test`.
 
+use crate::components::*;
 use crate::contact::*;
 use crate::domain::OrthoBox;
 use crate::engine::*;
@@ -735,7 +736,7 @@ fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Ve
 /// shearing (its own AVX2 passes, the streaming velocity and the virial on lanes).
 fn sheared_cell_run() -> (Vec<V3>, Vec<V3>, crate::M3) {
     use crate::domain::Domain;
-    use crate::prcell::PrCell;
+    use crate::domain::PrCell;
     let l = 9.0;
     let p = gas(0.3, l, 23, SizeDist::Uniform(0.8, 1.2));
     let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
@@ -839,13 +840,18 @@ fn unstable_integration_stops_with_a_clear_error() {
     assert!(s.p.x.iter().all(|x| x.iter().all(|c| c.is_finite())) || msg.contains("NaN"));
 }
 
-type WalledGas<F> =
-    Engine<F, Coulomb, OrthoBox, crate::engine::PlaneWalls<F, Coulomb>, crate::engine::Gravity>;
+type WalledGas<F> = Engine<
+    F,
+    Coulomb,
+    OrthoBox,
+    crate::components::PlaneWalls<F, Coulomb>,
+    crate::components::Gravity,
+>;
 
 /// A frictional gas (seed `seed`, restitution `e`) between walls at x = 0 and x = l, periodic
 /// in y and z, with the body force `g`.
 fn walled_gas<F: Form>(l: f64, seed: u64, e: f64, g: V3) -> WalledGas<F> {
-    use crate::engine::{Gravity, Plane, PlaneWalls};
+    use crate::components::{Gravity, Plane, PlaneWalls};
     let mut p = gas(0.35, l, seed, SizeDist::Uniform(0.9, 1.1));
     // squeeze x into [0.6, l - 0.6] so some particles touch the walls
     for x in p.x.iter_mut() {
@@ -912,7 +918,7 @@ fn per_particle_stress_sums_to_the_virial_and_walls_count() {
 
 #[test]
 fn cell_flip_changes_no_contact_force() {
-    use crate::prcell::PrCell;
+    use crate::domain::PrCell;
     // a dense-ish frictionless gas in a cell whose tilt is just below half a box length
     let l = 8.0;
     let mut p = gas(0.12, l, 31, SizeDist::Uniform(0.9, 1.1));
@@ -953,7 +959,7 @@ fn cell_flip_changes_no_contact_force() {
 #[test]
 fn cell_min_image_matches_brute_force_at_large_tilt() {
     use crate::domain::Domain;
-    use crate::prcell::PrCell;
+    use crate::domain::PrCell;
     let l = 8.0;
     let mut rng = Rng::new(5);
     for &tilt in &[0.0, 0.3, 0.499, -0.499] {
@@ -998,7 +1004,7 @@ fn cell_min_image_matches_brute_force_at_large_tilt() {
 #[test]
 fn sheared_cell_pruning_changes_no_bits_and_misses_no_contact() {
     use crate::domain::Domain;
-    use crate::prcell::PrCell;
+    use crate::domain::PrCell;
     let l = 9.0;
     let mut p = gas(0.3, l, 17, SizeDist::Uniform(0.8, 1.2));
     // at rest: the pairs first close by the cell's affine motion alone, which the inner

@@ -3,9 +3,10 @@
 
 use crate::errors::{param_err, IntoPy};
 use crate::sim::Sim;
+use granflow::components::{Body, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
 use granflow::contact::{Coulomb, Damping, Form, Friction, Frictionless, Hertz, Hooke, LawParams};
 use granflow::domain::OrthoBox;
-use granflow::engine::{Body, Engine, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
+use granflow::engine::Engine;
 use granflow::particles::Particles;
 use granflow::sim::Simulation;
 use granflow::V3;
@@ -291,11 +292,11 @@ fn contact_time(law: &Bound<'_, PyDict>, m_eff: f64) -> PyResult<f64> {
 fn cell_engine<F: Form, T: Friction>(
     p: Particles,
     law: LawParams,
-    cell: granflow::prcell::PrCell,
+    cell: granflow::domain::PrCell,
     dt: Option<f64>,
     skin: f64,
 ) -> PyResult<Box<dyn Simulation>> {
-    let e: Engine<F, T, granflow::prcell::PrCell, NoWalls, NoBody> =
+    let e: Engine<F, T, granflow::domain::PrCell, NoWalls, NoBody> =
         Engine::new(p, law, cell, NoWalls, NoBody, dt, skin).py_err()?;
     Ok(Box::new(e))
 }
@@ -322,7 +323,7 @@ fn cell_sim(
     let d = diameter.as_array().to_vec();
     let p = Particles::new(xs, &d, density).py_err()?;
     let law = parse_law(law, "")?;
-    let mut cell = granflow::prcell::PrCell::new(length, p.len(), wg, p_ext, tau_ext).py_err()?;
+    let mut cell = granflow::domain::PrCell::new(length, p.len(), wg, p_ext, tau_ext).py_err()?;
     cell.d_max = 2.0 * p.max_radius();
     let inner = match (form, law.mu > 0.0) {
         ("hooke", true) => cell_engine::<Hooke, Coulomb>(p, law, cell, dt, skin)?,

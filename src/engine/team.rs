@@ -1,28 +1,23 @@
 //! Plain steps run by one team of threads: one parallel region for a stretch of steps
 //! instead of two per step.
 //!
-//! At the channel (6754 particles) a step takes ~0.2 ms on two threads, and each of
-//! the step's two parallel passes (half-kick/drift/pack, then forces) is only a few chunks
-//! long. Handing each pass to rayon cost about a tenth of the threads' time in waiting
-//! (perf: `sched_yield` and work stealing, and one thread late to each pass, so the half-kick
-//! pass ran 62:38 between the two). A team enters one `rayon::broadcast` and meets at a
-//! spin barrier after each pass; within a pass each thread claims first the pieces of its
-//! home (the same particles every step, so they stay in its core's cache; the half-kick pass
-//! in quarter chunks, the force loop by chunk), then the others' from their far ends, so a
-//! thread that arrives late takes fewer pieces (`Claims`). Two threads on that channel: the
-//! waiting fell from 12 % to 6 % of the samples, 3.16 -> 3.25e7 particle-steps/s
-//! (`benchmarks/NOTES.md`).
+//! Each of a step's two parallel passes (half-kick/drift/pack, then forces) is only a few
+//! chunks long at the papers' sizes, so handing each pass to rayon costs a large share of the
+//! threads' time in waiting. A team enters one `rayon::broadcast` and meets at a spin barrier
+//! after each pass; within a pass each thread claims first the pieces of its home (the same
+//! particles every step, so they stay in its core's cache; the half-kick pass in quarter
+//! chunks, the force loop by chunk), then the others' from their far ends, so a thread that
+//! arrives late takes fewer pieces (`Claims`).
 //!
-//! Large systems (`Engine::fuse_from`, 65 536 particles) fuse the two passes into one sweep
-//! per step: a thread claims a chunk (in descending order), packs it, waits until the later
-//! chunks its cross pairs reach are packed (`NeighborList::cross_reach`; claimed earlier, so
-//! packed or being packed) and computes its forces while its records are still in cache.
-//! At 1e6 particles the records (96 MB) would otherwise come back from memory: 1.17 ->
-//! 1.39e7 particle-steps/s on one thread. The forces are computed before the step knows
-//! whether it must rebuild or prune first; a step that may (judged on the last drift speed
-//! with a margin, `Engine::fuse_margin`) runs the two passes instead, and one misjudged
-//! computes its forces again outside (the packed records carried through a rebuild, as the
-//! forces they were packed from are gone).
+//! Large systems (`Engine::fuse_from`) fuse the two passes into one sweep per step: a thread
+//! claims a chunk (in descending order), packs it, waits until the later chunks its cross
+//! pairs reach are packed (`NeighborList::cross_reach`; claimed earlier, so packed or being
+//! packed) and computes its forces while its records are still in cache (they would otherwise
+//! come back from memory). The forces are computed before the step knows whether it must
+//! rebuild or prune first; a step that may (judged on the last drift speed with a margin,
+//! `Engine::fuse_margin`) runs the two passes instead, and one misjudged computes its forces
+//! again outside (the packed records carried through a rebuild, as the forces they were
+//! packed from are gone).
 //!
 //! Determinism is unchanged: every piece and chunk computes exactly what it computes
 //! outside the team (a chunk's sums have the order of the list), the displacement bounds are
@@ -34,10 +29,11 @@
 //! pass and final half-kick are deferred, as in `step_once`). A step that needs more is
 //! finished outside once its first pass is done. One team runs at a time in the process
 //! (two teams sharing a rayon pool could each hold one thread and wait for the other's);
-//! a run that finds the team taken steps the usual way.
+//! a run that finds the team taken steps the usual way. Measurements: `benchmarks/NOTES.md`.
 
+use super::chunk::{self, ChunkIo, Shared};
 use super::*;
-use crate::forceloop::{ChunkIo, Shared};
+use crate::neighbor::image_shifts;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, TryLockError};
 
@@ -435,7 +431,7 @@ where
                             cidx: pcidx.slice_mut(c0..c1),
                             ps: &mut [],
                         };
-                        crate::forceloop::chunk::<F, T, D, W, G, false, false>(shared, c, io)
+                        chunk::chunk::<F, T, D, W, G, false, false>(shared, c, io)
                     };
                     // SAFETY: chunk c's report is written by the thread that took it
                     unsafe { *pouts.0.add(par * nch + c) = o };

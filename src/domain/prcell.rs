@@ -27,7 +27,7 @@
 //! unchanged, image counters are remapped, the pair list is rebuilt. Contact forces do not
 //! change (checked by a test).
 
-use crate::domain::{Domain, StepMaps};
+use super::{Domain, StepMaps};
 use crate::error::{Error, Result};
 use crate::particles::Particles;
 use crate::{M3, V3};
