@@ -30,5 +30,7 @@ pub use error::{Error, Result};
 pub type V3 = nalgebra::Vector3<f64>;
 /// 3x3 tensor.
 pub type M3 = nalgebra::Matrix3<f64>;
+// (to move into src/engine.rs as `#[cfg(test)] mod tests;`)
 #[cfg(test)]
-mod validation;
+#[path = "engine/tests.rs"]
+mod engine_tests;
