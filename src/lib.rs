@@ -29,5 +29,3 @@ pub use error::{Error, Result};
 pub type V3 = nalgebra::Vector3<f64>;
 /// 3x3 tensor.
 pub type M3 = nalgebra::Matrix3<f64>;
-#[cfg(test)]
-mod validation;

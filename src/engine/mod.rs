@@ -47,6 +47,8 @@ mod guards;
 mod integrate;
 mod simd;
 mod team;
+#[cfg(test)]
+mod tests;
 
 pub(crate) use chunk::ChunkOut;
 pub use chunk::PairOut;
