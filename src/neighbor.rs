@@ -538,7 +538,10 @@ impl NeighborList {
 
 /// The inner list of the chunk of particles i0..i1: every pair is written at the next free
 /// place, which advances only for a kept pair (no branch on the unpredictable test).
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one chunk's inner list from the list's separate arrays (borrowed apart for the parallel prune)"
+)]
 fn prune_chunk(
     ic: &mut InnerChunk,
     c: usize,
@@ -605,7 +608,10 @@ fn prune_chunk(
                 let r2 = dx * dx + dy * dy + dz * dz;
                 let cut = ri + rj + inner_skin;
                 // a NaN distance is kept: the force loop reports it as a contact
-                #[allow(clippy::neg_cmp_op_on_partial_ord)]
+                #[allow(
+                    clippy::neg_cmp_op_on_partial_ord,
+                    reason = "!(a >= b) keeps a NaN distance on purpose"
+                )]
                 let keep = !(r2 >= cut * cut);
                 // written at the next free place (len <= k < m), kept by advancing it
                 // (and a cross partner at the next free place of its own list, ncross <= len)
@@ -632,7 +638,7 @@ fn prune_chunk(
 
 thread_local! {
     /// Keys, owners and cross partners of a chunk's pairs while pruning.
-    #[allow(clippy::type_complexity)]
+    #[allow(clippy::type_complexity, reason = "three scratch vectors, named by the doc above")]
     static PRUNE_SCRATCH: std::cell::RefCell<(Vec<u32>, Vec<u16>, Vec<u32>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
 }

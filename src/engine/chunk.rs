@@ -57,7 +57,10 @@ pub(crate) struct Shared<'a, F: Form, T: Friction, D> {
 
 impl<'a, F: Form, T: Friction, D: Domain> Shared<'a, F, T, D> {
     /// What every chunk of one evaluation reads, from the engine's parts.
-    #[allow(clippy::too_many_arguments)]
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the engine's parts a chunk reads, gathered once per evaluation"
+    )]
     pub fn new<W: Walls<F, T>, G: Body>(
         law: &'a Law<F, T>,
         dom: &'a D,
@@ -357,7 +360,10 @@ where
 /// Pass 1 (baseline): the distance test over a block's pairs of the inner list (owner and
 /// key of each; the chunk is particles i0..i1), contacts appended in list order. Returns
 /// their number. Cross slots are numbered in list order, open ones included.
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "hot inlined pass: its inputs stay separate registers/borrows"
+)]
 #[inline(always)]
 fn filter<F: Form, T: Friction, D>(
     s: &Shared<F, T, D>,
@@ -628,7 +634,10 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
 
 /// Pass 3 for particle i: wall contacts, after all its pair contacts (the body force was
 /// the first term of its sum).
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "hot inlined pass: its inputs stay separate registers/borrows"
+)]
 #[inline(always)]
 fn wall_contacts<F, T, W, const STATS: bool>(
     s: &Shared<F, T, impl Domain>,
@@ -712,7 +721,10 @@ fn wall_contacts<F, T, W, const STATS: bool>(
 fn wall_mask<F: Form, T: Friction, D>(s: &Shared<F, T, D>, b0: usize, b1: usize) -> u32 {
     let mut m = 0u32;
     for (l, x) in s.xr[b0..b1].iter().enumerate() {
-        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        #[allow(
+            clippy::neg_cmp_op_on_partial_ord,
+            reason = "!(a >= b) is true for NaN on purpose: a NaN position counts as touching"
+        )]
         let t = s
             .planes
             .iter()

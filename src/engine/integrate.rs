@@ -661,7 +661,10 @@ fn kdp<T: Friction>(k: KickChunk) -> Drift {
 
 /// One chunk's slices for a deforming cell's first half-kick, drift and packing: (x, v, w,
 /// (x, R) records, velocity records) written, (f, t, 1/m, 1/I, R) read.
-#[allow(clippy::type_complexity)]
+#[allow(
+    clippy::type_complexity,
+    reason = "five written and five read slices of one chunk, named by the doc above"
+)]
 struct AffineKick<'a, 'b> {
     out: (
         &'a mut [V3],
@@ -742,7 +745,10 @@ pub(super) fn xr_record(x: &V3, r: f64) -> [f64; 4] {
 /// (v + h f/m, w + h t/I, h = dt/2), 1/m and R: the law's gather reads (v, 1/m) and (w, R)
 /// as two 32-byte halves.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one record from a particle's scalars, inlined into hot loops: a struct would only rename them"
+)]
 fn kin_record(v: &V3, w: &V3, f: &V3, t: &V3, im: f64, ii: f64, h: f64, r: f64) -> [f64; 8] {
     let vp = v + (h * im) * f;
     let wp = w + (h * ii) * t;

@@ -186,7 +186,10 @@ pub fn min_contact_time(params: &LawParams, p: &Particles) -> Result<f64> {
 
 impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W, G> {
     /// Build an engine. `dt = None` picks t_c/50 of the stiffest, lightest pair.
-    #[allow(clippy::too_many_arguments)]
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the engine's type-parameter parts plus dt and skin; scene::build is the friendly front"
+    )]
     pub fn new(
         p: Particles,
         law: LawParams,
@@ -440,7 +443,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
 
     /// Every stored history with the ids of its particles: pairs (id_i, id_j, h) oriented as
     /// listed, walls (id, wall, h).
-    #[allow(clippy::type_complexity)]
+    #[allow(
+        clippy::type_complexity,
+        reason = "(pair histories, wall histories) as the checkpoint stores them"
+    )]
     pub fn carried_histories(&self) -> (Vec<(u32, u32, T::History)>, Vec<(u32, u8, T::History)>) {
         let mut pairs = Vec::new();
         let mut walls = Vec::new();

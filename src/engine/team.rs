@@ -121,7 +121,10 @@ impl<X> Ptr<X> {
     }
     /// # Safety
     /// `r` lies within the allocation and no other thread touches it during the pass.
-    #[allow(clippy::mut_from_ref)]
+    #[allow(
+        clippy::mut_from_ref,
+        reason = "disjoint ranges of one buffer handed to the team's threads; the caller guarantees exclusivity (see Safety)"
+    )]
     unsafe fn slice_mut(&self, r: std::ops::Range<usize>) -> &mut [X] {
         unsafe { std::slice::from_raw_parts_mut(self.0.add(r.start), r.end - r.start) }
     }

@@ -43,7 +43,10 @@ unsafe fn ld(p: *const f64) -> __m256d {
 ///
 /// # Safety
 /// AVX2 CPU; `sc` fitted to the block's pairs.
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "AVX2 twin of chunk::filter with the same arguments"
+)]
 #[inline]
 #[target_feature(enable = "avx2")]
 pub(super) unsafe fn filter<F: Form, T: Friction, D>(
