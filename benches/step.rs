@@ -35,16 +35,16 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     let mut e: Engine<Hooke, T, OrthoBox, W, G> =
         Engine::new(p, law, bx, walls, body, Some(dt), skin()).unwrap();
     if let Some(k) = std::env::var("PRUNE").ok().and_then(|s| s.parse().ok()) {
-        e.prune_steps = k;
+        e.tuning.prune_steps = k;
     }
     if let Some(k) = std::env::var("FUSE").ok().and_then(|s| s.parse().ok()) {
-        e.fuse_from = k;
+        e.tuning.fuse_from = k;
     }
     if std::env::var_os("NO_PRUNE_TEAM").is_some() {
-        e.prune_in_team = false;
+        e.tuning.prune_in_team = false;
     }
     if std::env::var_os("NO_TEAM").is_some() {
-        e.team = false;
+        e.tuning.team = false;
     }
     e.run(10).unwrap();
     e.timers = Default::default();

@@ -109,7 +109,7 @@ fn sheared_cell_pruning_changes_no_bits_and_misses_no_contact() {
     let run = |prune: f64| {
         let mut e: Engine<Hooke, Coulomb, PrCell, NoWalls, NoBody> =
             Engine::new(p.clone(), law, cell.clone(), NoWalls, NoBody, None, 0.3).unwrap();
-        e.prune_steps = prune;
+        e.tuning.prune_steps = prune;
         let mut fewer = false;
         for k in 0..500 {
             e.run(if k < 200 { 1 } else { 20 }).unwrap();

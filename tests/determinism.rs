@@ -108,9 +108,9 @@ fn team_stops_at_the_same_overlap_error() {
     let mk = |team: bool, fused: bool| {
         // gravity strong enough that the wall layers compress over a few hundred steps
         let mut s = walled_gas::<Hooke>(10.0, 29, 0.7, V3::new(-3000.0, 0.0, 0.0));
-        s.team = team;
+        s.tuning.team = team;
         if fused {
-            s.fuse_from = 0;
+            s.tuning.fuse_from = 0;
         }
         s
     };
@@ -146,7 +146,7 @@ fn team_stops_at_the_same_overlap_error() {
 /// inner / listed pairs).
 fn pruned_run(prune_steps: f64) -> (Vec<[f64; 9]>, u64, u64, f64) {
     let mut s = walled_gas::<Hooke>(10.0, 17, 0.7, V3::new(-2.0, -1.0, 0.0));
-    s.prune_steps = prune_steps;
+    s.tuning.prune_steps = prune_steps;
     let (q0, b0) = (s.nl.prunes, s.nl.builds);
     let mut frac = 0.0;
     for _ in 0..20 {

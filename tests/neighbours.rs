@@ -35,7 +35,7 @@ fn list_bounds_miss_no_contact() {
         *v *= 5.0;
     }
     let mut s = periodic(p, l, 0.9, 0.3);
-    s.prune_steps = 2.0;
+    s.tuning.prune_steps = 2.0;
     let (b0, q0) = (s.nl.builds, s.nl.prunes);
     let (mut seen, mut kept) = (0, 0.0f64);
     for _ in 0..600 {
@@ -81,7 +81,7 @@ fn head_on_pairs_are_found_at_the_bound() {
         let mut p = Particles::new(x.clone(), &[1.0; 32], 1.0).unwrap();
         p.v = v.iter().map(|u| u + bulk).collect();
         let mut s = periodic(p, l, 0.9, 0.3);
-        s.prune_steps = prune;
+        s.tuning.prune_steps = prune;
         let mut touched = 0;
         for _ in 0..3000 {
             s.run(1).unwrap();

@@ -85,7 +85,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// off).
     pub(super) fn prune(&mut self) {
         let s_in = inner_skin_for(
-            self.prune_steps,
+            self.tuning.prune_steps,
             self.nl.skin,
             self.list_speed(self.vmax2),
             self.dt,

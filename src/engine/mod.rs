@@ -95,6 +95,48 @@ pub struct Timers {
     pub gather_phase: f64,
 }
 
+/// Knobs that change how fast a run goes, never its results (the same bits for any setting;
+/// tested).
+#[derive(Clone, Debug)]
+pub struct Tuning {
+    /// Dynamic pruning: the inner list's skin is chosen at each prune so that it lasts about
+    /// this many steps at the current largest speed (and, in a deforming cell, strain rate);
+    /// 0 turns pruning off (the force loop then tests every listed pair). Results do not
+    /// depend on it.
+    pub prune_steps: f64,
+    /// Run stretches of plain steps in one team of threads (`team`); the results are the
+    /// same bits either way (off: every step forks and joins its passes through rayon).
+    pub team: bool,
+    /// Prunes due inside a team stint are done by the team (each thread its chunks) instead
+    /// of ending the stint (on by default; the same results either way).
+    pub prune_in_team: bool,
+    /// Room kept in the cross index for a prune inside a team (None: an eighth more, +64;
+    /// Some(k): the index shrunk, then k more: for tests of the fallback, where a prune that
+    /// needs more is done outside).
+    pub(crate) team_cross_room: Option<usize>,
+    /// Systems of at least this many particles run their team steps as one sweep per step
+    /// (`team`: each chunk packed, then its forces computed while its records are in
+    /// cache); smaller ones in two passes. The same bits either way.
+    pub fuse_from: usize,
+    /// A fused sweep computes a step's forces before it is known whether the step must
+    /// rebuild or prune first (then they are computed again): a step is fused only if it
+    /// would not, were its largest drift speed this factor times the last one's.
+    pub(crate) fuse_margin: f64,
+}
+
+impl Default for Tuning {
+    fn default() -> Self {
+        Tuning {
+            prune_steps: DEFAULT_PRUNE_STEPS,
+            team: true,
+            prune_in_team: true,
+            team_cross_room: None,
+            fuse_from: FUSE_N,
+            fuse_margin: 1.25,
+        }
+    }
+}
+
 pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub p: Particles,
     pub law: Law<F, T>,
@@ -143,39 +185,18 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// Total energy at the first guard check (closed systems only).
     energy_ref: Option<f64>,
     forces_valid: bool,
+    /// Knobs of speed, never of results.
+    pub tuning: Tuning,
     /// The last evaluation left its cross-chunk pass and final half-kick to the next step's
     /// first pass (plain NVE inside `run`; see `step_once`).
     cross_pending: bool,
-    /// Dynamic pruning: the inner list's skin is chosen at each prune so that it lasts about
-    /// this many steps at the current largest speed (and, in a deforming cell, strain rate);
-    /// 0 turns pruning off (the force loop then tests every listed pair). Results do not
-    /// depend on it.
-    pub prune_steps: f64,
     /// Largest squared drift velocity of the last step relative to the lists' frame
     /// (`NeighborList::frame_v`).
     vmax2: f64,
     /// A deforming cell's kinetic sum sum_i m_i v_i (x) v_i after the last final half-kick.
     kin_sum: M3,
-    /// Run stretches of plain steps in one team of threads (`team`); the results are the
-    /// same bits either way (off: every step forks and joins its passes through rayon).
-    pub team: bool,
-    /// Prunes due inside a team stint are done by the team (each thread its chunks) instead
-    /// of ending the stint (on by default; the same results either way).
-    pub prune_in_team: bool,
     /// Prunes done inside team stints (a count for the tests).
     pub(crate) team_prunes: u64,
-    /// Room kept in the cross index for a prune inside a team (None: an eighth more, +64;
-    /// Some(k): the index shrunk, then k more: for tests of the fallback, where a prune that
-    /// needs more is done outside).
-    pub(crate) team_cross_room: Option<usize>,
-    /// Systems of at least this many particles run their team steps as one sweep per step
-    /// (`team`: each chunk packed, then its forces computed while its records are in
-    /// cache); smaller ones in two passes. The same bits either way.
-    pub fuse_from: usize,
-    /// A fused sweep computes a step's forces before it is known whether the step must
-    /// rebuild or prune first (then they are computed again): a step is fused only if it
-    /// would not, were its largest drift speed this factor times the last one's.
-    pub(crate) fuse_margin: f64,
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
@@ -280,16 +301,11 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross_stats: Vec::new(),
             energy_ref: None,
             forces_valid: false,
+            tuning: Tuning::default(),
             cross_pending: false,
-            prune_steps: DEFAULT_PRUNE_STEPS,
             vmax2: f64::INFINITY,
             kin_sum: M3::zeros(),
-            team: true,
-            prune_in_team: true,
             team_prunes: 0,
-            team_cross_room: None,
-            fuse_from: FUSE_N,
-            fuse_margin: 1.25,
         };
         e.rebuild();
         e.compute_forces_setup();

@@ -9,13 +9,13 @@
 //! chunks, the force loop by chunk), then the others' from their far ends, so a thread that
 //! arrives late takes fewer pieces (`Claims`).
 //!
-//! Large systems (`Engine::fuse_from`) fuse the two passes into one sweep per step: a thread
+//! Large systems (`Tuning::fuse_from`) fuse the two passes into one sweep per step: a thread
 //! claims a chunk (in descending order), packs it, waits until the later chunks its cross
 //! pairs reach are packed (`NeighborList::cross_reach`; claimed earlier, so packed or being
 //! packed) and computes its forces while its records are still in cache (they would otherwise
 //! come back from memory). The forces are computed before the step knows whether it must
 //! rebuild or prune first; a step that may (judged on the last drift speed with a margin,
-//! `Engine::fuse_margin`) runs the two passes instead, and one misjudged computes its forces
+//! `Tuning::fuse_margin`) runs the two passes instead, and one misjudged computes its forces
 //! again outside (the packed records carried through a rebuild, as the forces they were
 //! packed from are gone).
 //!
@@ -239,7 +239,7 @@ where
     /// lists and forces valid.
     pub(super) fn team_ready(&self) -> bool {
         let n = self.p.len();
-        self.team
+        self.tuning.team
             && D::PLAIN_NVE
             && !D::NEEDS_VIRIAL
             && !self.want_virial
@@ -315,7 +315,7 @@ where
         let pcstat = Ptr(self.cross_stats.as_mut_ptr());
         // room for the cross index of a prune inside the team (it must not move: every
         // thread holds its address); a prune that needs more is done outside
-        let more_cross = match self.team_cross_room {
+        let more_cross = match self.tuning.team_cross_room {
             Some(k) => {
                 self.cross_idx.shrink_to_fit();
                 k
@@ -334,8 +334,8 @@ where
         // fresh view after it
         let pnl = Ptr(&mut self.nl as *mut NeighborList);
         let (law, dom) = (&self.law, &self.domain);
-        let prune_steps = self.prune_steps;
-        let in_team_prune = self.prune_in_team;
+        let prune_steps = self.tuning.prune_steps;
+        let in_team_prune = self.tuning.prune_in_team;
         let (walls, body) = (&self.walls, &self.body);
         let guards = &self.guards;
 
@@ -359,8 +359,8 @@ where
         // the fused sweep (large systems): chunks claimed in descending order from one
         // counter (the p-th fused sweep claims (p-1) nch .. p nch); each chunk's pass number
         // once packed
-        let fused = n >= self.fuse_from;
-        let margin = self.fuse_margin;
+        let fused = n >= self.tuning.fuse_from;
+        let margin = self.tuning.fuse_margin;
         let next = AtomicUsize::new(0);
         let packed: Vec<AtomicUsize> = (0..nch).map(|_| AtomicUsize::new(0)).collect();
 

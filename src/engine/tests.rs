@@ -81,11 +81,11 @@ fn team_steps_change_no_bits() {
             .unwrap();
         pool.install(|| {
             let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
-            s.team = team;
-            s.team_cross_room = room;
+            s.tuning.team = team;
+            s.tuning.team_cross_room = room;
             if let Some(m) = fuse {
-                s.fuse_from = 0;
-                s.fuse_margin = m;
+                s.tuning.fuse_from = 0;
+                s.tuning.fuse_margin = m;
             }
             s.run(700).unwrap();
             (walled_state(&s), s.nl.builds, s.nl.prunes, s.team_prunes)
