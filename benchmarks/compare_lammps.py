@@ -34,7 +34,7 @@ from typing import Any
 
 import granflow as gf
 import numpy as np
-from granflow.analysis.errors import mean_se
+from granflow.analysis.stats import mean_se
 from granflow.channel import Channel
 from granflow.io import _jsonable, write_lammps_data
 from granflow.packing import dense_periodic_packing

@@ -4,7 +4,7 @@ import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
-from granflow.analysis.errors import mean_se
+from granflow.analysis.stats import mean_se
 from granflow.cell import ShearCell, fabric
 
 

@@ -253,10 +253,10 @@ T_FROM = "_timestep_study_t_from"
 def series_mean(column: str) -> Observable:
     """Observable: mean of ``column`` of the scene's ``series`` table over the samples of the
     timed run (after the time stored by :func:`scene_study` in ``scene._timestep_study_t_from``)
-    with its blocking standard error (:func:`granflow.analysis.errors.blocking`)."""
+    with its blocking standard error (:func:`granflow.analysis.stats.blocking`)."""
 
     def fn(scene: Any) -> tuple[float, float]:
-        from granflow.analysis.errors import blocking
+        from granflow.analysis.stats import blocking
 
         tabs = scene.tables()
         if "series" not in tabs or column not in tabs["series"].column_names:

@@ -12,7 +12,7 @@ Errors: profiles are averaged over the windows of the steady part.  Each derived
 columns and its standard error comes from a delete-one-block jackknife over ``n_blocks``
 contiguous blocks of windows; the block length is at least the statistical inefficiency g (in
 windows) of the spatially averaged flow velocity, so that blocks are nearly independent
-(:func:`granflow.analysis.errors.choose_blocks`).
+(:func:`granflow.analysis.stats.choose_blocks`).
 
 Columns used from the ``bins`` table (docs/columns.md): window, t0, t1, n_samples, bin, x_lo,
 x_hi, x, phi, u_y, w_z, T, sigma_xx, sigma_xy, Gamma, shear_production (missing optional
@@ -33,27 +33,20 @@ import numpy.typing as npt
 import polars as pl
 from scipy import optimize
 
-from .errors import (
-    BinMatrix,
-    FloatArray,
+from .binned import BinMatrix, bin_matrix, profile_se, window_steady_start
+from .stats import (
     SteadyStart,
-    TableLike,
-    bin_matrix,
     block_means,
     blocking,
     choose_blocks,
-    column,
-    column_names,
     jackknife_se,
     mean_se,
-    profile_se,
     quiet,
     ratio_se,
-    sample_interval,
     steady_state_start,
     trend,
-    window_steady_start,
 )
+from .tables import FloatArray, TableLike, column, column_names, sample_interval
 
 #: Volume fraction for arrested dynamics used by paper 000 for mu_p = 0.5 (section 1, 3.2).
 PHI_AD = 0.587
@@ -887,7 +880,7 @@ def summary(
     * ``omega_ratio_shearing`` (dense + loose zones), ``conduction`` ((B13) fit);
     * ``profile`` (polars DataFrame: half profile, all derived quantities with ``_se`` and a
       ``zone`` column), ``rheology`` (:func:`rheology_table`), ``profile_errors``
-      (whole-profile relative errors of u_y, phi, T from :func:`errors.profile_se`).
+      (whole-profile relative errors of u_y, phi, T from :func:`binned.profile_se`).
     """
     prof = profiles(
         bins,

@@ -1,15 +1,15 @@
-"""Statistical error of a run's key steady-state figures against averaging and wall time
-(issue #5, part 1), computed from the run's own samples by block averaging.
+"""Statistical error of a run's key steady-state figures against averaging and wall time,
+computed from the run's own samples by block averaging.
 
 For every figure the standard error (SE) of its steady-state value is computed from the first
-fraction ``f`` of the steady samples (``f`` in 1/32 ... 1, as :func:`errors.se_vs_time`), giving
+fraction ``f`` of the steady samples (``f`` in 1/32 ... 1, as :func:`stats.se_vs_time`), giving
 SE against the simulated averaging time ``T`` and the wall-clock time ``T * w`` spent on it,
 where ``w = wall_seconds / (t_end - t_begin)`` is the run's wall time per unit simulated time
 (``t_begin``: the start of the sampled run, one sample interval before the first ``series``
 sample or the first window's ``t0``; ``t_end``: the last sample).  ``SE = C / sqrt(T)`` is fitted
 and extrapolated to the averaging time (and wall time) needed for a requested relative SE.  A
 figure is flagged ``too_short`` when the blocking of the full steady part (or of fewer than two
-prefixes) did not reach its plateau (:mod:`granflow.analysis.errors`: Flyvbjerg-Petersen
+prefixes) did not reach its plateau (:mod:`granflow.analysis.stats`: Flyvbjerg-Petersen
 blocking with Jonsson's plateau test; at least 20 plateau blocks required): its SE is then
 probably an underestimate and the extrapolation rough.
 
@@ -25,7 +25,7 @@ Figures
   central differences), blocked like any other series, so correlations between windows and
   bins are kept.
 * ``phi-profile`` and ``u_y-profile``: the profile as a whole, the RMS over bins of the per-bin
-  SE (:func:`errors.profile_se_vs_time`); its ``value`` is the RMS of the mean profile, so
+  SE (:func:`binned.profile_se_vs_time`); its ``value`` is the RMS of the mean profile, so
   ``rel_se`` is the relative profile error.
 
 The steady part starts where MSER puts it on ``|vcm_y|`` of the ``series`` table (or on the
@@ -51,23 +51,18 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from . import channel as ch
-from .errors import (
+from .binned import bin_matrix, profile_se_vs_time, window_steady_start
+from .stats import (
     DEFAULT_FRACTIONS,
     DEFAULT_MIN_BLOCKS,
-    FloatArray,
     SEvsTime,
-    _se_table_result,
-    bin_matrix,
     blocking,
-    column,
-    column_names,
-    profile_se_vs_time,
     quiet,
-    sample_interval,
+    se_table_result,
     se_vs_time,
     steady_state_start,
-    window_steady_start,
 )
+from .tables import FloatArray, column, column_names, sample_interval
 
 CHANNEL_FIGURES: tuple[str, ...] = (
     "u_slip",
@@ -119,7 +114,7 @@ class ErrorReport:
         Per figure: True when the data are too short for the block analysis to have reached
         its plateau (see the module docstring).
     results
-        Per figure: the :class:`errors.SEvsTime` behind the rows.
+        Per figure: the :class:`stats.SEvsTime` behind the rows.
     wall_seconds, wall_per_time, t_start, t_end
         Wall time of the run, wall seconds per unit simulated time, start of the steady part
         and end of the run.
@@ -362,7 +357,7 @@ def _channel_report(
                 "converged": b.converged,
             })
     for k in names:
-        results[k] = _se_table_result(rows[k], wall_per_time, t_start)
+        results[k] = se_table_result(rows[k], wall_per_time, t_start)
         values[k] = float(results[k].table["mean"][-1]) if results[k].table.height else math.nan
     # profiles as a whole
     for col, fig in (("phi", "phi-profile"), ("u_y", "u_y-profile")):
@@ -442,7 +437,7 @@ def error_vs_time(
     tables
         The run's tables by name (``scene.tables()`` or the run directory's Parquet files):
         'bins' (and 'series') for the channel, 'series' for the cell; any table type of
-        :func:`errors.as_columns`.
+        :func:`tables.as_columns`.
     wall_seconds
         Wall-clock time of the run; the wall rate is ``wall_seconds / (t_end - t_begin)``.
     target_rel_se
