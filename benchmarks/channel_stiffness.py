@@ -43,7 +43,7 @@ import numpy as np
 import polars as pl
 from granflow.analysis import channel as ach
 from granflow.analysis.stats import steady_state_start
-from granflow.channel import Channel
+from granflow.scenes.channel import Channel
 
 DT_1E6 = 1.2e-4  # 000 §2: dt = 1.2e-4 sqrt(d/g) at k_n = 1e6
 

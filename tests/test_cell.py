@@ -5,7 +5,7 @@ import numpy as np
 import polars as pl
 import pytest
 from granflow.analysis.stats import mean_se
-from granflow.cell import ShearCell, fabric
+from granflow.scenes.cell import ShearCell, fabric
 
 
 def _series(c):
