@@ -4,32 +4,30 @@
 * :mod:`.stats` — Flyvbjerg-Petersen blocking, means and ratios with SEs, trend test,
   steady-state detection, SE against run time, jackknife over blocks.
 * :mod:`.binned` — binned profiles: window x bin matrices, whole-profile SEs.
-* :mod:`.channel` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran 2022).
+* :mod:`.channel_profiles` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran
+  2022): flow state and steady profiles with jackknife SEs.
+* :mod:`.channel` — the same paper's model curves, velocity scaling, zones, rheology, summary.
 * :mod:`.rheology` — stress-controlled cell, paper 002 (Srivastava et al.), Table 1.
 * :mod:`.report` — SE of a run's key figures against averaging and wall time.
 * :mod:`.plots` — the papers' figures, error / work-precision plots and a run directory's
   figures (PNG).
 """
 
-from . import binned, channel, plots, rheology, stats, tables
+from . import binned, channel, channel_profiles, plots, rheology, stats, tables
 from .binned import ProfileErrors, profile_se, profile_se_vs_time
 from .channel import (
-    ChannelProfiles,
-    Estimate,
-    FlowState,
     Zones,
     conduction_length,
-    flow_state,
     mean_velocity_32,
     mu_B3,
     phi_B4,
-    profiles,
     scaled_profile_31,
     summary,
     velocity_profile_31,
     velocity_scaling,
     zones,
 )
+from .channel_profiles import ChannelProfiles, Estimate, FlowState, flow_state, profiles
 from .plots import (
     plot_cell_rheology,
     plot_channel_fields,
@@ -74,6 +72,7 @@ from .tables import as_columns, to_polars
 __all__ = [
     "binned",
     "channel",
+    "channel_profiles",
     "plots",
     "rheology",
     "stats",

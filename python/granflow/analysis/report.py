@@ -29,7 +29,8 @@ Figures
   ``rel_se`` is the relative profile error.
 
 The steady part starts where MSER puts it on ``|vcm_y|`` of the ``series`` table (or on the
-per-window mean ``u_y`` without a series), as in :func:`granflow.analysis.channel.profiles`.
+per-window mean ``u_y`` without a series), as in
+:func:`granflow.analysis.channel_profiles.profiles`.
 
 ``cell`` (paper 002, ``series`` table): ``mu1``, ``mu2``, ``mu3``, ``phi``, ``I``, each blocked
 directly; the steady part starts at :func:`granflow.analysis.rheology.steady_start`.
@@ -51,6 +52,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from . import channel as ch
+from . import channel_profiles as cp
 from .binned import bin_matrix, profile_se_vs_time, window_steady_start
 from .stats import (
     DEFAULT_FRACTIONS,
@@ -265,7 +267,7 @@ def _time_span(tables: Mapping[str, Any]) -> tuple[float, float]:
 # channel
 # --------------------------------------------------------------------------------------------
 def _channel_scalars(
-    prof: ch.ChannelProfiles,
+    prof: cp.ChannelProfiles,
 ) -> tuple[list[str], Callable[[Mapping[str, FloatArray]], FloatArray]]:
     xi = prof.xi
 
@@ -335,7 +337,7 @@ def _channel_report(
     results: dict[str, SEvsTime] = {}
     values: dict[str, float] = {}
     # scalar figures by the delta method on the window series
-    prof = ch.profiles(bins, series, start_time=t_start)
+    prof = cp.profiles(bins, series, start_time=t_start)
     names, fn = _channel_scalars(prof)
     sel = bm.select(keep)
     dts = sel.dt

@@ -503,12 +503,13 @@ class Channel:
     def summary(self) -> dict[str, Any]:
         """The paper's analysis (granflow.analysis.channel.summary) flattened to scalars."""
         from granflow.analysis import channel as ach
+        from granflow.analysis.channel_profiles import flow_state
 
         t = self.tables()
         out: dict[str, Any] = {"n": self.prep_info.get("n"),
                                "phi_bar_achieved": self.prep_info.get("phi_bar_achieved")}
         if "series" in t:
-            fs = ach.flow_state(t["series"])
+            fs = flow_state(t["series"])
             out["flow_state"] = fs.state
         if "bins" not in t or t["bins"].num_rows == 0:
             return out

@@ -371,7 +371,7 @@ SMALL_CHANNEL: dict[str, Any] = {"W": 10.0, "H": 10.0, "B": 4.0}
 
 
 def _channel(params: Mapping[str, Any], sim_time: float, n_samples: int = 50) -> Outcome:
-    from granflow.analysis.channel import flow_state
+    from granflow.analysis.channel_profiles import flow_state
 
     cls = _scene("channel")
     ch = cls.from_spec({**SMALL_CHANNEL, **params}, seed=0)
