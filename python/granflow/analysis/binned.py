@@ -19,6 +19,8 @@ from .stats import (
     SEvsTime,
     SteadyStart,
     blocking_many,
+    prefix_lengths,
+    prefix_row,
     quiet,
     se_table_result,
     steady_state_start,
@@ -249,25 +251,10 @@ def profile_se_vs_time(
     mat = bm.data[col][start_window:]
     dts = bm.dt
     rows: list[dict[str, Any]] = []
-    for f in sorted(set(float(v) for v in fractions)):
-        n_f = int(round(f * mat.shape[0]))
-        if n_f < 2:
-            continue
+    for f, n_f in prefix_lengths(fractions, mat.shape[0]):
         b = blocking_many(mat[:n_f], dts, min_blocks=min_blocks)
         rms, rms_err, scale, frac = _rms_profile(b)
-        T = n_f * dts
-        rows.append(
-            {
-                "fraction": f,
-                "n": n_f,
-                "T": T,
-                "wall_time": None if wall_time_per_unit_t is None else T * wall_time_per_unit_t,
-                "mean": scale,
-                "se": rms,
-                "se_err": rms_err,
-                "tau": float(np.nanmax(b.tau)),
-                "converged": frac >= converged_fraction,
-            }
-        )
+        rows.append(prefix_row(f, n_f, dts, wall_time_per_unit_t, scale, rms, rms_err,
+                               float(np.nanmax(b.tau)), frac >= converged_fraction))
     t_start = float(bm.t0[start_window]) if bm.t0.size > start_window else np.nan
     return se_table_result(rows, wall_time_per_unit_t, t_start)

@@ -59,6 +59,8 @@ from .stats import (
     DEFAULT_MIN_BLOCKS,
     SEvsTime,
     blocking,
+    prefix_lengths,
+    prefix_row,
     quiet,
     se_table_result,
     se_vs_time,
@@ -343,21 +345,13 @@ def _channel_report(
     dts = sel.dt
     nw = sel.window.size
     rows: dict[str, list[dict[str, Any]]] = {k: [] for k in names}
-    for f in sorted({float(v) for v in fractions}):
-        n_f = int(round(f * nw))
-        if n_f < 2:
-            continue
+    for f, n_f in prefix_lengths(fractions, nw):
         mats = {k: v[:n_f] for k, v in sel.data.items()}
         val, z = _linearised(fn, mats, sel.n_samples[:n_f])
         for j, k in enumerate(names):
             b = blocking(z[:, j], dts, min_blocks=min_blocks)
-            T = n_f * dts
-            rows[k].append({
-                "fraction": f, "n": n_f, "T": T,
-                "wall_time": None if wall_per_time is None else T * wall_per_time,
-                "mean": float(val[j]), "se": b.se, "se_err": b.se_err, "tau": b.tau,
-                "converged": b.converged,
-            })
+            rows[k].append(prefix_row(f, n_f, dts, wall_per_time, float(val[j]), b.se,
+                                      b.se_err, b.tau, b.converged))
     for k in names:
         results[k] = se_table_result(rows[k], wall_per_time, t_start)
         values[k] = float(results[k].table["mean"][-1]) if results[k].table.height else math.nan

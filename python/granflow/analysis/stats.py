@@ -662,26 +662,40 @@ def se_vs_time(
     dts = sample_interval(tt) if dt is None else float(dt)
     ts, xs = tt[start:], xx[start:]
     rows: list[dict[str, Any]] = []
-    for f in sorted(set(float(v) for v in fractions)):
-        n_f = int(round(f * xs.size))
-        if n_f < 2:
-            continue
+    for f, n_f in prefix_lengths(fractions, xs.size):
         b = blocking(xs[:n_f], dts, min_blocks=min_blocks)
-        T = n_f * dts
-        rows.append(
-            {
-                "fraction": f,
-                "n": n_f,
-                "T": T,
-                "wall_time": None if wall_time_per_unit_t is None else T * wall_time_per_unit_t,
-                "mean": b.mean,
-                "se": b.se,
-                "se_err": b.se_err,
-                "tau": b.tau,
-                "converged": b.converged,
-            }
-        )
+        rows.append(prefix_row(f, n_f, dts, wall_time_per_unit_t, b.mean, b.se, b.se_err, b.tau,
+                               b.converged))
     return se_table_result(rows, wall_time_per_unit_t, float(ts[0]) if ts.size else np.nan)
+
+
+def prefix_lengths(fractions: Sequence[float], n: int) -> list[tuple[float, int]]:
+    """(fraction, number of samples) of every prefix of ``n`` samples with at least two."""
+    out = []
+    for f in sorted({float(v) for v in fractions}):
+        n_f = int(round(f * n))
+        if n_f >= 2:
+            out.append((f, n_f))
+    return out
+
+
+def prefix_row(fraction: float, n: int, dt: float, wall_time_per_unit_t: float | None,
+               mean: float, se: float, se_err: float, tau: float, converged: bool
+               ) -> dict[str, Any]:
+    """One row of an SE-against-averaging-time table (see :func:`se_table_result`) for the
+    prefix of ``n`` samples ``dt`` apart."""
+    T = n * dt
+    return {
+        "fraction": fraction,
+        "n": n,
+        "T": T,
+        "wall_time": None if wall_time_per_unit_t is None else T * wall_time_per_unit_t,
+        "mean": mean,
+        "se": se,
+        "se_err": se_err,
+        "tau": tau,
+        "converged": converged,
+    }
 
 
 @quiet
