@@ -8,10 +8,10 @@ on k_n in the dense shearing and plug zones, so they are not compared here.
 One small channel is poured and released once (:meth:`Channel.prepare_from`) and run from the
 same packing at each k_n with dt = 1.2e-4 sqrt(1e6/k_n) (000's dt at k_n = 1e6, ~t_c/11, scaled
 as t_c ~ k_n^-1/2) and the same sampling interval in time. After ``--discard`` the folded half
-profiles phi(xi) and u(xi) (granflow.analysis.channel.profiles, block-jackknife SE) are compared
-bin by bin for each pair of k_n: z = (a - b)/sqrt(se_a^2 + se_b^2), chi^2 = sum z^2 over the
-bins (neighbouring bins are correlated, so chi^2/n is indicative, not a test), the fraction of
-bins with |z| < 2 and < 3, and the same z for u_slip and u_max.
+profiles phi(xi) and u(xi) (granflow.analysis.channel_profiles.profiles, block-jackknife SE) are
+compared bin by bin for each pair of k_n: z = (a - b)/sqrt(se_a^2 + se_b^2), chi^2 = sum z^2
+over the bins (neighbouring bins are correlated, so chi^2/n is indicative, not a test), the
+fraction of bins with |z| < 2 and < 3, and the same z for u_slip and u_max.
 
 Control (``--control``): the softest k_n again with dt x 0.9, the same physics on a different
 (chaotic) trajectory. Its pair with the softest run is the null comparison: if it disagrees as
@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 import polars as pl
 from granflow.analysis import channel as ach
-from granflow.analysis.errors import steady_state_start
-from granflow.channel import Channel
+from granflow.analysis.stats import steady_state_start
+from granflow.scenes.channel import Channel
 
 DT_1E6 = 1.2e-4  # 000 §2: dt = 1.2e-4 sqrt(d/g) at k_n = 1e6
 

@@ -34,10 +34,10 @@ from typing import Any
 
 import granflow as gf
 import numpy as np
-from granflow.analysis.errors import mean_se
-from granflow.channel import Channel
+from granflow.analysis.stats import mean_se
 from granflow.io import _jsonable, write_lammps_data
 from granflow.packing import dense_periodic_packing
+from granflow.scenes.channel import Channel
 
 sys.path.insert(0, str(Path(__file__).parent))
 import lammps_peer as lp  # noqa: E402
@@ -80,7 +80,7 @@ def channel_state(flow_steps: int = FLOW_STEPS, seed: int = 1, threads: int = 1)
         ch.sim.run(flow_steps, progress=False)
         s = ch.sim
         np.savez(f, x=s.get_positions(), v=s.get_velocities(), omega=s.get_angular_velocities(),
-                 d=s._sim.diameters(), W=W, H=H, B=B, flow_steps=flow_steps, seed=seed)
+                 d=s.core.diameters(), W=W, H=H, B=B, flow_steps=flow_steps, seed=seed)
         print(f"  prepared the flowing channel (N = {s.n}, t_flow = {flow_steps * DT:g}) in "
               f"{time.perf_counter() - t0:.0f} s -> {f}")
     z = np.load(f)
@@ -235,10 +235,10 @@ def _rel(a: Array, b: Array, scale: float, mask: Array | None = None) -> float:
 def forces_case(st: State, gamma_n: float, omega: bool, wd: Path) -> dict[str, Any]:
     """One step-0 comparison: granflow and LAMMPS forces/torques/wall forces plus references."""
     sim = gf_sim(st, gamma_n, omega=omega)
-    sim._sim.compute_forces()  # the set-up evaluation: no history increment (as LAMMPS's)
+    sim.core.compute_forces()  # the set-up evaluation: no history increment (as LAMMPS's)
     f_gf = sim.get_forces()
     if st["kind"] == "channel":
-        f_gf[:, 1] += sim._sim.masses() * G  # granflow's force includes gravity m g (-y)
+        f_gf[:, 1] += sim.core.masses() * G  # granflow's force includes gravity m g (-y)
     t_gf = sim.get_torques()
     scene = "channel" if st["kind"] == "channel" else "periodic"
     path = data_file(st, wd / f"{st['kind']}_w{int(omega)}.data", omega=omega)
@@ -273,7 +273,7 @@ def forces_case(st: State, gamma_n: float, omega: bool, wd: Path) -> dict[str, A
     tr = np.einsum("ij,ij->i", t_gf[sel], t_l[sel]) / np.einsum("ij,ij->i", t_l[sel], t_l[sel])
     out["torque_ratio_gf_over_lmp_min_max"] = [float(tr.min(initial=1)), float(tr.max(initial=1))]
     if st["kind"] == "channel":
-        wf_gf = np.asarray(sim._sim.wall_forces())
+        wf_gf = np.asarray(sim.core.wall_forces())
         wf_l = -np.array([r["wall_force0"]["lo"], r["wall_force0"]["hi"]])  # force on the wall
         wsc = float(np.abs(wf_l).max())
         out["wall_force_gf"] = wf_gf.tolist()
@@ -329,7 +329,7 @@ def part_run(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
 
     def sample() -> None:
         e = sim.energies()
-        wf = np.asarray(sim._sim.wall_forces())  # force of the particles on each wall
+        wf = np.asarray(sim.core.wall_forces())  # force of the particles on each wall
         g["ke_trans"].append(e["kinetic_translational"])
         g["ke_rot"].append(e["kinetic_rotational"])
         g["lo_xx"].append(wf[0, 0] / area)
@@ -337,11 +337,11 @@ def part_run(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
         g["hi_xx"].append(wf[1, 0] / area)
         g["hi_xy"].append(wf[1, 1] / area)
 
-    sim._sim.compute_forces()
+    sim.core.compute_forces()
     sample()
     t0 = time.perf_counter()
     for _ in range(steps // every):
-        sim._sim.run(every)
+        sim.core.run(every)
         sample()
     t_gf = time.perf_counter() - t0
     path = data_file(st, wd / "channel_run.data")
@@ -428,10 +428,10 @@ def part_traj(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
         def gf_traj(x0: Array, st: State = st, steps: int = steps, every: int = every,
                     dt: float = dt) -> dict[int, Array]:
             sim = gf_sim(dict(st, x=x0), gn, dt=dt)
-            fr = {0: sim._sim.unwrapped_positions()}
+            fr = {0: sim.core.unwrapped_positions()}
             for k in range(every, steps + 1, every):
-                sim._sim.run(every)
-                fr[k] = sim._sim.unwrapped_positions()
+                sim.core.run(every)
+                fr[k] = sim.core.unwrapped_positions()
             return fr
 
         g = gf_traj(st["x"])
@@ -503,7 +503,7 @@ def _lammps_box(h: Array, o: Array, x: Array, v: Array) -> dict[str, Any]:
 
 
 def part_shear(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
-    from granflow.cell import ShearCell
+    from granflow.scenes.cell import ShearCell
 
     n, steps = a.cell_n, a.cell_steps
     cell = ShearCell(N=n, mu_s=0.3, p_ext=1e-4, tau_ratio=0.5, seed=1, threads=1)
@@ -710,9 +710,9 @@ def part_speed(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
 
     def gf_rate(threads: int, damping: str) -> float:
         sim = gf_sim(st, None if damping == "e_n" else gn, threads=threads)
-        sim._sim.compute_forces()  # set-up outside the timing, as LAMMPS's Loop time
+        sim.core.compute_forces()  # set-up outside the timing, as LAMMPS's Loop time
         t0 = time.perf_counter()
-        sim._sim.run(steps)
+        sim.core.run(steps)
         rate = n * steps / (time.perf_counter() - t0)
         info["gf_contacts_per_particle_end"] = sim.diagnostics()["contacts"] / n
         return rate

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import granflow as gf
 import numpy as np
-from granflow.cell import ShearCell
-from granflow.channel import Channel
 from granflow.packing import dense_periodic_packing
+from granflow.scenes.cell import ShearCell
+from granflow.scenes.channel import Channel
 
 OUT = Path(__file__).parent / "out"
 
@@ -54,10 +54,10 @@ def main() -> None:
     for mu in (0.5, 0.0):
         s = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e6, e_n=0.82, mu=mu), velocities=v,
                           dt=1.2e-4, skin=0.2, threads=a.threads)
-        rows.append(report(f"periodic packing, mu = {mu}", s._sim, a.steps))
+        rows.append(report(f"periodic packing, mu = {mu}", s.core, a.steps))
     ch = Channel(W=20, H=30, B=10, phi_bar=0.6, kn=1e6, seed=1, threads=a.threads)
     ch.prepare()
-    rows.append(report("channel (walls, gravity)", ch.sim._sim, a.steps))
+    rows.append(report("channel (walls, gravity)", ch.core, a.steps))
     cell = ShearCell(N=6000, p_ext=1e-4, tau_ratio=0.5, seed=1, threads=a.threads)
     cell.run(20_000)
     rows.append(report("stress-controlled cell (compacting)", cell.sim, a.steps))

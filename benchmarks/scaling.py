@@ -110,7 +110,7 @@ def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
         walls=[gf.Wall(0, 0.0, 1.0), gf.Wall(0, width, -1.0)], wall_law=law,
         gravity=(0.0, -cl.G, 0.0), dt=cl.DT, skin=cl.SKIN, threads=threads[0],
     )  # fmt: skip
-    sim._sim.run(20)  # set-up evaluation, first rebuilds and history allocations
+    sim.core.run(20)  # set-up evaluation, first rebuilds and history allocations
     t_build = time.perf_counter() - t0
     rss1 = rss_bytes()
     mem = sim.memory()
@@ -118,9 +118,9 @@ def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
     rates = {}
     for t in threads:
         sim.set_threads(t)
-        sim._sim.run(10)
+        sim.core.run(10)
         t0 = time.perf_counter()
-        sim._sim.run(steps)
+        sim.core.run(steps)
         rates[t] = n * steps / (time.perf_counter() - t0)
     return {
         "n_target": n_target, "n": n, "grow": grow, "copies": [nx, ny, nz], "W": width,

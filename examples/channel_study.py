@@ -68,7 +68,7 @@ def main() -> None:
             break
         prev_u = u
     try:
-        from granflow.plotting import plot_run
+        from granflow.analysis.plots import plot_run
 
         for p in plot_run(out):
             print("wrote", p)

@@ -10,7 +10,7 @@ import tempfile
 from pathlib import Path
 
 import polars as pl
-from granflow.plotting import plot_run
+from granflow.analysis.plots import plot_run
 from granflow.runner import execute
 
 SPEC = {

@@ -9,5 +9,7 @@ echo "== cargo test (kernel)"
 cargo test --workspace --exclude granflow-python --release
 echo "== ruff"
 ruff check python tests benchmarks examples
+echo "== mypy"
+mypy python/granflow
 echo "== pytest"
 python -m pytest -q tests

@@ -7,6 +7,7 @@ import polars as pl
 import pyarrow as pa
 import pytest
 from granflow.analysis import channel as ch
+from granflow.analysis import channel_profiles as cp
 from granflow.analysis import plots
 
 US, UM, DELTA, W = 3.0, 4.2, 8.0, 40.0
@@ -191,13 +192,13 @@ def test_B3_B4_and_model_curves():
     "kind", ["steady", "accelerating", "arrested", "fluctuating", "decelerating"]
 )
 def test_flow_state(kind):
-    fs = ch.flow_state(synthetic_series(kind))
+    fs = cp.flow_state(synthetic_series(kind))
     assert fs.state == kind
     assert fs.is_steady == (kind in ("steady", "fluctuating"))
 
 
 def test_flow_state_numbers():
-    fs = ch.flow_state(pl.DataFrame(synthetic_series("accelerating")))
+    fs = cp.flow_state(pl.DataFrame(synthetic_series("accelerating")))
     assert fs.slope == pytest.approx(0.05, rel=0.01)
     assert fs.t_stat > 3
 
@@ -226,7 +227,7 @@ def test_summary_input_types_and_series():
 
 def test_unfolded_profile_uses_wall0_half():
     tab, truth = synthetic_bins(nw=32, seed=5)
-    prof = ch.profiles(tab, symmetrise=False)
+    prof = cp.profiles(tab, symmetrise=False)
     assert not prof.folded
     est = ch.velocity_scaling(prof)
     assert abs(est["delta_fit"].value - DELTA) < 4 * est["delta_fit"].se
@@ -234,7 +235,7 @@ def test_unfolded_profile_uses_wall0_half():
 
 def test_profile_start_time_selects_windows():
     tab, _ = synthetic_bins(nw=40, seed=6, t_first=0.0)
-    prof = ch.profiles(tab, start_time=200.0)
+    prof = cp.profiles(tab, start_time=200.0)
     assert prof.t_start >= 200.0 and prof.n_windows <= 20
 
 

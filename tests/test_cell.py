@@ -4,8 +4,8 @@ import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
-from granflow.analysis.errors import mean_se
-from granflow.cell import ShearCell, fabric
+from granflow.analysis.stats import mean_se
+from granflow.scenes.cell import ShearCell, fabric
 
 
 def _series(c):

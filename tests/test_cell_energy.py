@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from granflow.cell import ShearCell, energy_balance
 from granflow.errors import InstabilityError
+from granflow.scenes.cell import ShearCell, energy_balance
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
-from granflow.channel import Channel, cap_volume_below
+from granflow.scenes.channel import Channel, cap_volume_below
 
 
 @pytest.fixture(scope="module")
@@ -20,7 +20,7 @@ def test_preparation_hits_phi_bar(flowing):
     info = c.prep_info
     vmax = np.pi * 1.1**3 / 6
     assert abs(info["phi_bar_achieved"] - 0.63) < vmax / (8 * 12 * 4)
-    d = c._sim.diameters()
+    d = c.core.diameters()
     assert info["phi_bar_achieved"] == pytest.approx(np.sum(np.pi * d**3 / 6) / (8 * 12 * 4))
     # the 30/40/30 % mix by number
     frac = [np.mean(np.isclose(d, s)) for s in (0.9, 1.0, 1.1)]
@@ -47,7 +47,7 @@ def test_bins_tile_the_channel_and_sphere_slab_volumes():
 
 def test_momentum_balance_walls_carry_weight_less_momentum_change(flowing):
     s = pl.from_arrow(flowing.tables()["series"])
-    m = flowing._sim.masses().sum()
+    m = flowing.core.masses().sum()
     t, py, iy = s["t"].to_numpy(), s["py"].to_numpy(), s["wall_impulse_y"].to_numpy()
     # dP_y = -M g dt - (impulse on the walls): exact for the discrete trajectory
     lhs = py[-1] - py[0]
@@ -122,6 +122,6 @@ def test_channel_checkpoint_restart_is_bitwise(tmp_path):
     b = Channel(W=6, H=8, B=3.5, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4, sample_every=50, window=4)
     b.restore(tmp_path / "c.gfck")
     b.run(500)
-    assert np.array_equal(a._sim.positions(), b._sim.positions())
-    assert np.array_equal(a._sim.angular_velocities(), b._sim.angular_velocities())
+    assert np.array_equal(a.core.positions(), b.core.positions())
+    assert np.array_equal(a.core.angular_velocities(), b.core.angular_velocities())
     assert b.prep_info == a.prep_info and b.achieved_phi_bar == a.achieved_phi_bar

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from granflow.channel import Channel
 from granflow.errors import ParameterError
+from granflow.scenes.channel import Channel
 
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "channel_stiffness.py"
 
@@ -27,12 +27,12 @@ def test_prepare_from_reuses_the_packing():
     src.prepare()
     soft = Channel(**geo, kn=1e5, dt=3.8e-4, seed=5, threads=1)
     soft.prepare_from(src)
-    assert np.array_equal(soft.sim._sim.positions(), src.sim._sim.positions())
-    assert soft.sim._sim.dt == pytest.approx(3.8e-4) and soft.law.kn == 1e5
+    assert np.array_equal(soft.core.positions(), src.core.positions())
+    assert soft.core.dt == pytest.approx(3.8e-4) and soft.law.kn == 1e5
     assert soft.prep_info["prepared_with_kn"] == 1e6
     assert soft.prep_info["n"] == src.prep_info["n"]
     soft.run(200)
-    assert soft.sim._sim.step == 200
+    assert soft.core.step == 200
     with pytest.raises(ParameterError, match="W"):
         Channel(**{**geo, "W": 12.0}, kn=1e5, threads=1).prepare_from(src)
     # a run packing is not a prepared one

@@ -104,7 +104,7 @@ def test_ctrl_c_stops_between_steps_and_leaves_sim_usable(gas, make_sim):
 def test_momentum_conserved_without_gravity(gas, make_sim):
     box, x, d, v = gas
     s = make_sim(box, x, d, v)
-    m = s._sim.masses()
+    m = s.core.masses()
     p0 = (m[:, None] * s.get_velocities()).sum(0)
     s.run(1000)
     p1 = (m[:, None] * s.get_velocities()).sum(0)
@@ -117,7 +117,7 @@ def test_arrow_batch_roundtrip_without_copy_semantics():
     box = gf.Box(length=(6.0, 6.0, 6.0))
     x, d = gf.random_packing(gf.sizes.mono(1.0), box, 0.2, seed=1)
     s = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e5))
-    assert s._sim.take_tables() == []  # a plain box has no samplers: nothing to pay for
+    assert s.core.take_tables() == []  # a plain box has no samplers: nothing to pay for
     assert isinstance(pa.schema([]), pa.Schema)
 
 

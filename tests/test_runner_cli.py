@@ -147,7 +147,7 @@ def test_sweep_records_a_failing_run_and_goes_on(tmp_path):
 def test_failed_run_keeps_what_it_recorded(tmp_path):
     spec = {**GAS, "params": {**GAS["params"], "sample_every": 10}, "run": {"steps": 100_000},
             "output": {}}
-    import granflow.scenes as sc
+    import granflow.scenes.gas as sc
 
     orig = sc.PeriodicGas._sample
 

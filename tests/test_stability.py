@@ -1,4 +1,4 @@
-"""granflow.stability: the fast (CI) cases of the stability suite."""
+"""granflow.studies.stability: the fast (CI) cases of the stability suite."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import polars as pl
 import pytest
-from granflow import stability as st
+from granflow.studies import stability as st
 
 KERNEL = [c for c in st.select("fast") if c.scene is None]
 SCENE_FAST = [c for c in st.select("fast") if c.scene is not None]

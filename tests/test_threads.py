@@ -98,7 +98,7 @@ def test_sheared_cell_one_and_two_threads_same_bits() -> None:
     """The stress-controlled cell: its half-kicks and drift run in parallel over chunks and
     its kinetic stress is summed per chunk, then over the chunks in order; 2000 particles
     are four chunks, and the run builds and prunes its lists many times."""
-    from granflow.cell import ShearCell
+    from granflow.scenes.cell import ShearCell
 
     runs = []
     for threads in (1, 2):

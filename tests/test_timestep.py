@@ -1,4 +1,4 @@
-"""granflow.timestep: work-precision studies (binary collision against the analytic e_n,
+"""granflow.studies.timestep: work-precision studies (binary collision against the analytic e_n,
 a generic scene study on the periodic gas)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
-from granflow import timestep as ts
+from granflow.studies import timestep as ts
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +82,7 @@ def test_scene_study_series_observable():
 def test_sheared_packing_without_the_cell_is_a_clear_error(monkeypatch):
     from granflow import scenes
 
-    monkeypatch.setitem(sys.modules, "granflow.cell", None)  # import fails: module missing
+    monkeypatch.setitem(sys.modules, "granflow.scenes.cell", None)  # import fails: module missing
     monkeypatch.delitem(scenes.SCENES, "cell", raising=False)
     with pytest.raises(gf.GranflowError, match="stress-controlled cell"):
         ts.sheared_packing_study()

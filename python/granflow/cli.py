@@ -49,7 +49,7 @@ def _cmd_summary(a: argparse.Namespace) -> int:
 
 
 def _cmd_plot(a: argparse.Namespace) -> int:
-    from granflow.plotting import plot_run
+    from granflow.analysis.plots import plot_run
 
     for p in plot_run(a.dir):
         print(p)

@@ -189,7 +189,7 @@ def snapshot(sim: Any, path: str | os.PathLike, fmt: str | None = None) -> Path:
     ``.xyz`` extended XYZ, ``.vtp`` VTK PolyData)."""
     path = Path(path)
     fmt = fmt or path.suffix.lstrip(".")
-    core = sim._sim
+    core = sim.core
     x, v, w, f = core.positions(), core.velocities(), core.angular_velocities(), core.forces()
     d = core.diameters()
     if fmt == "xyz":

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -43,10 +44,10 @@ class RunResult:
 
 def load_spec(path: str | os.PathLike) -> dict[str, Any]:
     """Read a TOML scene file."""
-    try:
+    if sys.version_info >= (3, 11):
         import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
+    else:  # Python 3.10
+        import tomli as tomllib
     with open(path, "rb") as f:
         return tomllib.load(f)
 
@@ -124,20 +125,23 @@ def execute(
     wall0 = 0.0
     if ck.exists() and man is not None and _same_run(man["spec"], spec):
         scene.restore(ck)
-        scene.load_tables(_load_tables(d, scene._sim.time))
+        scene.load_tables(_load_tables(d, scene.core.time))
         wall0 = float(man.get("wall_seconds", 0.0))
+    else:
+        scene.prepare(progress=progress)
+    core = scene.core
     run, outp = spec["run"], spec["output"]
     total = int(run["steps"])
     every = int(run.get("checkpoint_every", 0)) or max(total // 10, 1)
     snap_every = int(outp.get("snapshot_every", 0))
     params = {"scene": spec["scene"], "seed": seed, **scene.parameters()}
-    manifest = {
+    manifest: dict[str, Any] = {
         "spec": spec,
         "parameters": params,
         "granflow_version": __version__,
         "seed": seed,
         "status": "running",
-        "steps_done": scene._sim.step,
+        "steps_done": core.step,
         "steps_total": total,
         "wall_seconds": wall0,
     }
@@ -151,21 +155,21 @@ def execute(
         scene.save_checkpoint(ck)
         manifest.update(
             status=status,
-            steps_done=scene._sim.step,
+            steps_done=core.step,
             wall_seconds=wall0 + time.perf_counter() - t0,
         )
         io.write_manifest(d, manifest)
 
     try:
-        while scene._sim.step < total:
-            nxt = min(total, (scene._sim.step // every + 1) * every)
+        while core.step < total:
+            nxt = min(total, (core.step // every + 1) * every)
             if snap_every:
-                nxt = min(nxt, (scene._sim.step // snap_every + 1) * snap_every)
-            scene.run(nxt - scene._sim.step, progress=progress)
-            if snap_every and scene._sim.step % snap_every == 0:
+                nxt = min(nxt, (core.step // snap_every + 1) * snap_every)
+            scene.run(nxt - core.step, progress=progress)
+            if snap_every and core.step % snap_every == 0:
                 fmt = outp.get("snapshot_format", "xyz")
-                io.snapshot(scene, d / "snapshots" / f"snap_{scene._sim.step:010d}.{fmt}")
-            if scene._sim.step % every == 0 and scene._sim.step < total:
+                io.snapshot(scene, d / "snapshots" / f"snap_{core.step:010d}.{fmt}")
+            if core.step % every == 0 and core.step < total:
                 save_all("running")
     except (KeyboardInterrupt, SystemExit):
         save_all("interrupted")
@@ -175,13 +179,13 @@ def execute(
         if outp.get("tables", True):
             for name, t in scene.tables().items():
                 io.write_parquet(t, d / f"{name}.parquet", params=params, seed=seed)
-        manifest.update(status="failed", steps_done=scene._sim.step,
+        manifest.update(status="failed", steps_done=core.step,
                         wall_seconds=wall0 + time.perf_counter() - t0)
         io.write_manifest(d, manifest)
         raise
     summary = scene.summary()
     summary["wall_seconds"] = wall0 + time.perf_counter() - t0
-    summary["steps"] = scene._sim.step
+    summary["steps"] = core.step
     with io.atomic_path(d / "summary.json") as tmp:
         tmp.write_text(json.dumps(io._jsonable(summary), indent=1, sort_keys=True))
     save_all("finished")

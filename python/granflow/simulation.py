@@ -15,7 +15,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import pyarrow as pa
@@ -159,17 +159,25 @@ class Simulation:
 
         Ctrl-C (or SIGTERM) stops between steps: the state stays consistent and usable, a
         checkpoint is written if ``checkpoint`` is set, and ``KeyboardInterrupt`` is re-raised.
-        With ``checkpoint_every = n`` a checkpoint is also written every n steps (atomically:
-        a crash loses at most the steps since the last one)."""
-        hook = None
+        With ``checkpoint`` set a checkpoint is also written at the end of the run and, with
+        ``checkpoint_every = n``, every n steps (at multiples of n in the step count;
+        atomically: a crash loses at most the steps since the last one)."""
+        hook: Callable[[], None] | None = None
         if checkpoint is not None:
             path = os.fspath(checkpoint)
 
             def hook() -> None:
                 self.save_checkpoint(path)
 
+        elif checkpoint_every is not None:
+            raise ParameterError(
+                f"invalid checkpoint_every = {checkpoint_every} without checkpoint: allowed "
+                "with a checkpoint path")
         run_chunked(self._sim, steps, progress, self, every=checkpoint_every, on_every=hook,
                     on_stop=hook)
+        if hook is not None and not (checkpoint_every and self.step % checkpoint_every == 0
+                                     and steps > 0):
+            hook()
 
     # -- checkpoints ---------------------------------------------------------------------
     def _rebuild_params(self) -> dict:
@@ -217,6 +225,12 @@ class Simulation:
         return sim
 
     # -- state ---------------------------------------------------------------------------
+    @property
+    def core(self) -> _core.Sim:
+        """The kernel simulation (:class:`granflow._core.Sim`): every array and diagnostic of
+        the state, for analysis code that needs more than this class shows."""
+        return self._sim
+
     @property
     def n(self) -> int:
         return self._sim.n
@@ -301,7 +315,7 @@ def run_chunked(
     sim: _core.Sim,
     steps: int,
     progress: bool | None,
-    owner: object = None,
+    owner: Any = None,
     every: int | None = None,
     on_every: Callable[[], None] | None = None,
     on_stop: Callable[[], None] | None = None,

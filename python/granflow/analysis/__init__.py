@@ -1,52 +1,39 @@
 """Pure-Python analysis of granflow output tables (docs/columns.md).
 
-* :mod:`.errors` — Flyvbjerg-Petersen blocking, steady-state detection, SE against run time
-  (also for binned profiles), jackknife over blocks.
-* :mod:`.channel` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran 2022).
+* :mod:`.tables` — column access for any table type (pyarrow, polars, mappings), ``to_polars``.
+* :mod:`.stats` — Flyvbjerg-Petersen blocking, means and ratios with SEs, trend test,
+  steady-state detection, SE against run time, jackknife over blocks.
+* :mod:`.binned` — binned profiles: window x bin matrices, whole-profile SEs.
+* :mod:`.channel_profiles` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran
+  2022): flow state and steady profiles with jackknife SEs.
+* :mod:`.channel` — the same paper's model curves, velocity scaling, zones, rheology, summary.
 * :mod:`.rheology` — stress-controlled cell, paper 002 (Srivastava et al.), Table 1.
-* :mod:`.plots` — the papers' figures and error / work-precision plots (PNG).
+* :mod:`.report` — SE of a run's key figures against averaging and wall time.
+* :mod:`.plots` — the papers' figures, error / work-precision plots and a run directory's
+  figures (PNG).
 """
 
-from . import channel, errors, plots, rheology
+from . import binned, channel, channel_profiles, plots, rheology, stats, tables
+from .binned import ProfileErrors, profile_se, profile_se_vs_time
 from .channel import (
-    ChannelProfiles,
-    Estimate,
-    FlowState,
     Zones,
     conduction_length,
-    flow_state,
     mean_velocity_32,
     mu_B3,
     phi_B4,
-    profiles,
     scaled_profile_31,
     summary,
     velocity_profile_31,
     velocity_scaling,
     zones,
 )
-from .errors import (
-    BlockingResult,
-    MeanSE,
-    ProfileErrors,
-    SEvsTime,
-    SteadyStart,
-    as_columns,
-    blocking,
-    blocking_many,
-    mean_se,
-    profile_se,
-    profile_se_vs_time,
-    ratio_se,
-    se_vs_time,
-    steady_state_start,
-    to_polars,
-)
+from .channel_profiles import ChannelProfiles, Estimate, FlowState, flow_state, profiles
 from .plots import (
     plot_cell_rheology,
     plot_channel_fields,
     plot_channel_mu_phi_I,
     plot_channel_velocity,
+    plot_run,
     plot_se_vs_time,
     plot_work_precision,
 )
@@ -68,13 +55,29 @@ from .rheology import (
     reference_parameters,
     table1_row,
 )
+from .stats import (
+    BlockingResult,
+    MeanSE,
+    SEvsTime,
+    SteadyStart,
+    blocking,
+    blocking_many,
+    mean_se,
+    ratio_se,
+    se_vs_time,
+    steady_state_start,
+)
+from .tables import as_columns, to_polars
 
 __all__ = [
+    "binned",
     "channel",
-    "errors",
+    "channel_profiles",
     "plots",
     "rheology",
-    # errors
+    "stats",
+    "tables",
+    # tables, stats, binned
     "BlockingResult",
     "MeanSE",
     "ProfileErrors",
@@ -128,6 +131,7 @@ __all__ = [
     "plot_channel_fields",
     "plot_channel_mu_phi_I",
     "plot_channel_velocity",
+    "plot_run",
     "plot_se_vs_time",
     "plot_work_precision",
 ]

@@ -6,6 +6,7 @@ switch), which renders with Agg.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -20,7 +21,8 @@ from matplotlib.ticker import NullFormatter
 
 from . import channel as ch
 from . import rheology as rh
-from .errors import SEvsTime, TableLike, quiet, to_polars
+from .stats import SEvsTime, quiet
+from .tables import TableLike, to_polars
 
 PathLike = str | os.PathLike[str]
 _ZONE_COLOURS = {"plug": "tab:gray", "dense": "tab:brown", "loose": "black", "wall": "tab:red"}
@@ -113,7 +115,7 @@ def plot_channel_fields(
     for label, s in _as_runs(summaries):
         p: pl.DataFrame = s["profile"]
         xi = p["xi"].to_numpy()
-        kw = {"fmt": "o-", "ms": 3, "capsize": 2, "label": label or None}
+        kw: dict[str, Any] = {"fmt": "o-", "ms": 3, "capsize": 2, "label": label or None}
         ax[0].errorbar(xi, p["phi"].to_numpy(), yerr=p["phi_se"].to_numpy(), **kw)
         ax[1].errorbar(
             xi, np.abs(p["gamma_dot"].to_numpy()), yerr=p["gamma_dot_se"].to_numpy(), **kw
@@ -347,7 +349,14 @@ def plot_se_vs_time(
     ax.set_ylabel(ylabel)
     if wall:
         w = wall
-        sec = ax.secondary_xaxis("top", functions=(lambda t: t * w, lambda s: s / w))
+
+        def to_wall(t: Any) -> Any:
+            return t * w
+
+        def from_wall(s: Any) -> Any:
+            return s / w
+
+        sec = ax.secondary_xaxis("top", functions=(to_wall, from_wall))
         sec.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap
         sec.set_xlabel("wall-clock time [s]")
     handles = ax.get_legend_handles_labels()[0]
@@ -360,7 +369,7 @@ def plot_se_vs_time(
 def plot_work_precision(table: TableLike, path: PathLike) -> Path:
     """Work-precision diagram: deviation vs wall time (log-log), one line per observable,
     points labelled by ``dt_label``.  ``table`` needs columns dt_label, wall_time, observable,
-    deviation (any table type accepted by :func:`errors.as_columns`; text columns are read
+    deviation (any table type accepted by :func:`tables.as_columns`; text columns are read
     through polars)."""
     df = to_polars(table)
     fig = Figure(figsize=(6, 4.5))
@@ -379,3 +388,42 @@ def plot_work_precision(table: TableLike, path: PathLike) -> Path:
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7)
     return _save(fig, path)
+
+
+def plot_run(directory: PathLike) -> list[Path]:
+    """Write the scene's figures for the run in ``directory`` (``granflow plot DIR``) as PNG
+    files in DIR/plots; returns the PNG paths."""
+    import pyarrow.parquet as pq
+
+    from granflow.errors import GranflowIOError
+
+    d = Path(directory)
+    man = d / "manifest.json"
+    if not man.exists():
+        raise GranflowIOError(f"{d}: no manifest.json (not a granflow run directory)")
+    scene = json.loads(man.read_text())["spec"]["scene"]
+    out = d / "plots"
+    out.mkdir(exist_ok=True)
+    paths: list[Path] = []
+    series = pq.read_table(d / "series.parquet") if (d / "series.parquet").exists() else None
+    if scene == "channel" and (d / "bins.parquet").exists():
+        bins = pq.read_table(d / "bins.parquet")
+        s = ch.summary(bins, series)
+        paths.append(plot_channel_velocity(s, out / "velocity.png"))
+        paths.append(plot_channel_fields(s, out / "fields.png"))
+        paths.append(plot_channel_mu_phi_I(s, out / "mu_phi_I.png"))
+    if series is not None and "t" in series.column_names:
+        t = series["t"].to_numpy()
+        cols = [c for c in ("vcm_y", "ke_trans", "mu1", "phi", "p") if c in series.column_names]
+        if cols:
+            fig = Figure(figsize=(6, 2.2 * len(cols)))
+            axes = fig.subplots(len(cols), 1, sharex=True, squeeze=False)[:, 0]
+            for ax, c in zip(axes, cols, strict=True):
+                ax.plot(t, series[c].to_numpy(), lw=0.8)
+                ax.set_ylabel(c)
+            axes[-1].set_xlabel("t")
+            fig.tight_layout()
+            p = out / "series.png"
+            fig.savefig(p, dpi=120)
+            paths.append(p)
+    return paths

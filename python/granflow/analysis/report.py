@@ -1,15 +1,15 @@
-"""Statistical error of a run's key steady-state figures against averaging and wall time
-(issue #5, part 1), computed from the run's own samples by block averaging.
+"""Statistical error of a run's key steady-state figures against averaging and wall time,
+computed from the run's own samples by block averaging.
 
 For every figure the standard error (SE) of its steady-state value is computed from the first
-fraction ``f`` of the steady samples (``f`` in 1/32 ... 1, as :func:`errors.se_vs_time`), giving
+fraction ``f`` of the steady samples (``f`` in 1/32 ... 1, as :func:`stats.se_vs_time`), giving
 SE against the simulated averaging time ``T`` and the wall-clock time ``T * w`` spent on it,
 where ``w = wall_seconds / (t_end - t_begin)`` is the run's wall time per unit simulated time
 (``t_begin``: the start of the sampled run, one sample interval before the first ``series``
 sample or the first window's ``t0``; ``t_end``: the last sample).  ``SE = C / sqrt(T)`` is fitted
 and extrapolated to the averaging time (and wall time) needed for a requested relative SE.  A
 figure is flagged ``too_short`` when the blocking of the full steady part (or of fewer than two
-prefixes) did not reach its plateau (:mod:`granflow.analysis.errors`: Flyvbjerg-Petersen
+prefixes) did not reach its plateau (:mod:`granflow.analysis.stats`: Flyvbjerg-Petersen
 blocking with Jonsson's plateau test; at least 20 plateau blocks required): its SE is then
 probably an underestimate and the extrapolation rough.
 
@@ -25,11 +25,12 @@ Figures
   central differences), blocked like any other series, so correlations between windows and
   bins are kept.
 * ``phi-profile`` and ``u_y-profile``: the profile as a whole, the RMS over bins of the per-bin
-  SE (:func:`errors.profile_se_vs_time`); its ``value`` is the RMS of the mean profile, so
+  SE (:func:`binned.profile_se_vs_time`); its ``value`` is the RMS of the mean profile, so
   ``rel_se`` is the relative profile error.
 
 The steady part starts where MSER puts it on ``|vcm_y|`` of the ``series`` table (or on the
-per-window mean ``u_y`` without a series), as in :func:`granflow.analysis.channel.profiles`.
+per-window mean ``u_y`` without a series), as in
+:func:`granflow.analysis.channel_profiles.profiles`.
 
 ``cell`` (paper 002, ``series`` table): ``mu1``, ``mu2``, ``mu3``, ``phi``, ``I``, each blocked
 directly; the steady part starts at :func:`granflow.analysis.rheology.steady_start`.
@@ -51,23 +52,21 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from . import channel as ch
-from .errors import (
+from . import channel_profiles as cp
+from .binned import bin_matrix, profile_se_vs_time, window_steady_start
+from .stats import (
     DEFAULT_FRACTIONS,
     DEFAULT_MIN_BLOCKS,
-    FloatArray,
     SEvsTime,
-    _se_table_result,
-    bin_matrix,
     blocking,
-    column,
-    column_names,
-    profile_se_vs_time,
+    prefix_lengths,
+    prefix_row,
     quiet,
-    sample_interval,
+    se_table_result,
     se_vs_time,
     steady_state_start,
-    window_steady_start,
 )
+from .tables import FloatArray, column, column_names, sample_interval
 
 CHANNEL_FIGURES: tuple[str, ...] = (
     "u_slip",
@@ -119,7 +118,7 @@ class ErrorReport:
         Per figure: True when the data are too short for the block analysis to have reached
         its plateau (see the module docstring).
     results
-        Per figure: the :class:`errors.SEvsTime` behind the rows.
+        Per figure: the :class:`stats.SEvsTime` behind the rows.
     wall_seconds, wall_per_time, t_start, t_end
         Wall time of the run, wall seconds per unit simulated time, start of the steady part
         and end of the run.
@@ -270,7 +269,7 @@ def _time_span(tables: Mapping[str, Any]) -> tuple[float, float]:
 # channel
 # --------------------------------------------------------------------------------------------
 def _channel_scalars(
-    prof: ch.ChannelProfiles,
+    prof: cp.ChannelProfiles,
 ) -> tuple[list[str], Callable[[Mapping[str, FloatArray]], FloatArray]]:
     xi = prof.xi
 
@@ -340,29 +339,21 @@ def _channel_report(
     results: dict[str, SEvsTime] = {}
     values: dict[str, float] = {}
     # scalar figures by the delta method on the window series
-    prof = ch.profiles(bins, series, start_time=t_start)
+    prof = cp.profiles(bins, series, start_time=t_start)
     names, fn = _channel_scalars(prof)
     sel = bm.select(keep)
     dts = sel.dt
     nw = sel.window.size
     rows: dict[str, list[dict[str, Any]]] = {k: [] for k in names}
-    for f in sorted({float(v) for v in fractions}):
-        n_f = int(round(f * nw))
-        if n_f < 2:
-            continue
+    for f, n_f in prefix_lengths(fractions, nw):
         mats = {k: v[:n_f] for k, v in sel.data.items()}
         val, z = _linearised(fn, mats, sel.n_samples[:n_f])
         for j, k in enumerate(names):
             b = blocking(z[:, j], dts, min_blocks=min_blocks)
-            T = n_f * dts
-            rows[k].append({
-                "fraction": f, "n": n_f, "T": T,
-                "wall_time": None if wall_per_time is None else T * wall_per_time,
-                "mean": float(val[j]), "se": b.se, "se_err": b.se_err, "tau": b.tau,
-                "converged": b.converged,
-            })
+            rows[k].append(prefix_row(f, n_f, dts, wall_per_time, float(val[j]), b.se,
+                                      b.se_err, b.tau, b.converged))
     for k in names:
-        results[k] = _se_table_result(rows[k], wall_per_time, t_start)
+        results[k] = se_table_result(rows[k], wall_per_time, t_start)
         values[k] = float(results[k].table["mean"][-1]) if results[k].table.height else math.nan
     # profiles as a whole
     for col, fig in (("phi", "phi-profile"), ("u_y", "u_y-profile")):
@@ -442,7 +433,7 @@ def error_vs_time(
     tables
         The run's tables by name (``scene.tables()`` or the run directory's Parquet files):
         'bins' (and 'series') for the channel, 'series' for the cell; any table type of
-        :func:`errors.as_columns`.
+        :func:`tables.as_columns`.
     wall_seconds
         Wall-clock time of the run; the wall rate is ``wall_seconds / (t_end - t_begin)``.
     target_rel_se

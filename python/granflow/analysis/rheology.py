@@ -22,22 +22,17 @@ import numpy.typing as npt
 import polars as pl
 from scipy import optimize
 
-from .errors import (
+from .stats import (
     DEFAULT_MIN_BLOCKS,
-    FloatArray,
     SteadyStart,
-    TableLike,
     Trend,
     blocking,
     blocking_many,
-    column,
-    column_names,
     quiet,
-    sample_interval,
     steady_state_start_multi,
-    to_polars,
     trend,
 )
+from .tables import FloatArray, TableLike, column, column_names, sample_interval, to_polars
 
 # --------------------------------------------------------------------------------------------
 # reference values from paper 002
@@ -235,7 +230,7 @@ class RunState:
 def steady_start(
     series: TableLike, key_columns: Sequence[str] = KEY_COLUMNS, **kwargs: Any
 ) -> SteadyStart:
-    """Steady start of a cell run: the latest MSER start (errors.steady_state_start) over the
+    """Steady start of a cell run: the latest MSER start (stats.steady_state_start) over the
     key observables present (default shear_rate, phi, p, mu1)."""
     t = column(series, "t")
     names = column_names(series)

@@ -29,8 +29,10 @@ import pyarrow as pa
 
 from granflow import _core
 from granflow.errors import InstabilityError, ParameterError
-from granflow.scenes import check_keys, register
+from granflow.simulation import run_chunked
 from granflow.sizes import uniform
+
+from ._base import check_keys, register, run_with_checkpoints
 
 AX = "xyz"
 
@@ -119,11 +121,16 @@ class ShearCell:
         self.wall_seconds = 0.0
 
     @property
-    def _sim(self):
+    def core(self) -> _core.Sim:
+        """The kernel simulation (the same object as ``sim``)."""
         return self.sim
 
+    def prepare(self, progress: bool | None = None) -> None:
+        """Nothing to do: the cell starts from its dilute random packing, made when built."""
+
     @classmethod
-    def from_spec(cls, params: Mapping[str, Any], seed: int = 0, threads: int | None = None):
+    def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
+                  threads: int | None = None) -> ShearCell:
         check_keys("params", params, {f.name for f in fields(cls)} - {"seed", "threads"})
         return cls(**dict(params), seed=seed, threads=threads)
 
@@ -226,21 +233,26 @@ class ShearCell:
         return row
 
     # -- protocol ----------------------------------------------------------------------------
-    def run(self, steps: int, progress: bool | None = None, checkpoint: str | None = None,
+    def run(self, steps: int, progress: bool | None = None,
+            checkpoint: str | os.PathLike[str] | None = None,
             checkpoint_every: int | None = None) -> None:
-        from granflow.simulation import run_chunked
+        """Advance ``steps`` steps, sampling every ``sample_every`` steps; ``checkpoint`` and
+        ``checkpoint_every`` as :class:`granflow.scenes.Scene` says."""
 
-        target = self.sim.step + int(steps)
-        while self.sim.step < target:
-            c = min(self.sample_every - self.sim.step % self.sample_every,
-                    target - self.sim.step)
-            try:
-                run_chunked(self.sim, c, progress, self)
-            except InstabilityError as exc:
-                raise InstabilityError(f"{exc}; {self.state_context()}") from exc
-            self.phi_max = max(self.phi_max, self._vs / float(self.sim.volume))
-            if self.sim.step % self.sample_every == 0:
-                self._rows.append(self.observe())
+        def advance(steps: int) -> None:
+            target = self.sim.step + int(steps)
+            while self.sim.step < target:
+                c = min(self.sample_every - self.sim.step % self.sample_every,
+                        target - self.sim.step)
+                try:
+                    run_chunked(self.sim, c, progress, self)
+                except InstabilityError as exc:
+                    raise InstabilityError(f"{exc}; {self.state_context()}") from exc
+                self.phi_max = max(self.phi_max, self._vs / float(self.sim.volume))
+                if self.sim.step % self.sample_every == 0:
+                    self._rows.append(self.observe())
+
+        run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
     def state_context(self) -> str:
         """The cell's state in words, appended to a kernel InstabilityError: phi now and its
@@ -290,15 +302,15 @@ class ShearCell:
                 out[k + "_se"] = float(row["se"][0])
         return out
 
-    def save_checkpoint(self, path: str | os.PathLike) -> None:
+    def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
         self.sim.save_checkpoint(os.fspath(path), "{}")
 
-    def restore(self, path: str | os.PathLike) -> None:
+    def restore(self, path: str | os.PathLike[str]) -> None:
         self.sim.load_checkpoint(os.fspath(path))
 
 
 # --------------------------------------------------------------------------------------------
-# energy balance of the Parrinello-Rahman cell (issue #5)
+# energy balance of the Parrinello-Rahman cell
 # --------------------------------------------------------------------------------------------
 @dataclass
 class EnergyBalance:

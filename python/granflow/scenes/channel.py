@@ -47,10 +47,12 @@ from typing import Any, ClassVar
 import numpy as np
 import pyarrow as pa
 
-from granflow.errors import ParameterError
-from granflow.scenes import check_keys, register
+from granflow import _core
+from granflow.errors import ConfigurationError, ParameterError
 from granflow.simulation import Box, ContactLaw, Simulation, Wall, contact_time
 from granflow.sizes import SizeDist, discrete
+
+from ._base import check_keys, register, run_with_checkpoints
 
 RCP = 0.64
 SIGMA = ["xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz"]
@@ -142,7 +144,8 @@ class Channel:
         return discrete({float(k): float(v) for k, v in self.sizes.items()})
 
     @classmethod
-    def from_spec(cls, params: Mapping[str, Any], seed: int = 0, threads: int | None = None):
+    def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
+                  threads: int | None = None) -> Channel:
         check_keys("params", params, {f.name for f in fields(cls)} - {"seed", "threads"})
         p = dict(params)
         if "sizes" in p:
@@ -176,9 +179,10 @@ class Channel:
 
     # -- preparation -----------------------------------------------------------------------
     def prepare(self, progress: bool | None = None) -> None:
-        """Fill and release (see the module docstring)."""
-        from granflow import _core
-
+        """Fill and release (see the module docstring); does nothing if the channel is prepared
+        already (or restored from a checkpoint)."""
+        if self.sim is not None:
+            return
         vol_target = self.phi_bar * self.W * self.H * self.B
         d = self.size_dist().diameters_for_volume(vol_target, self.seed)
         vs = float(np.sum(np.pi * d**3 / 6))
@@ -192,7 +196,7 @@ class Channel:
         dt = contact_time(prep_law, d, self.density) / 20
         sim = Simulation(x, d, box, prep_law, walls=walls, gravity=(0.0, -1.0, 0.0), dt=dt,
                          threads=self.threads, density=self.density, skin=self.skin)
-        m = sim._sim.masses()
+        m = sim.core.masses()
         t_max = 40.0 + 4 * np.sqrt(2 * h_fill)
         check = max(int(0.5 / dt), 1)
         ke = np.inf
@@ -268,9 +272,8 @@ class Channel:
         a new one: the same particles in the same place, with this channel's law, dt and
         sampling (e.g. one packing run at several kn). ``other`` must be prepared and not yet
         run, with the same geometry."""
-        if other.sim is None:
-            other.prepare()
-        core = other.sim._sim
+        other.prepare()
+        core = other.core
         for name in ("W", "H", "B", "density"):
             if getattr(self, name) != getattr(other, name):
                 raise ParameterError(
@@ -284,28 +287,34 @@ class Channel:
                       {**other.prep_info, "prepared_with_kn": other.kn})
 
     def _cache_static(self) -> None:
-        core = self.sim._sim
+        core = self.core
         self._d = core.diameters()
         self._m = core.masses()
         self._inertia = self._m * self._d**2 / 10
         self._edges = self.bin_edges()
         self._vbin = np.diff(self._edges) * self.H * self.B
 
-    @property
-    def _sim(self):
+    def _simulation(self) -> Simulation:
         if self.sim is None:
-            self.prepare()
-        return self.sim._sim
+            raise ConfigurationError(
+                "channel not prepared: call prepare() (or run(), or restore()) first")
+        return self.sim
+
+    @property
+    def core(self) -> _core.Sim:
+        """The kernel simulation of the prepared channel (after :meth:`prepare`, :meth:`run`
+        or :meth:`restore`; before, a :class:`granflow.ConfigurationError`)."""
+        return self._simulation().core
 
     @property
     def achieved_phi_bar(self) -> float:
-        if self.sim is None:
-            self.prepare()
-        return self.prep_info["phi_bar_achieved"]
+        """(total particle volume) / (W H B) of the prepared packing (prepares if needed)."""
+        self.prepare()
+        return float(self.prep_info["phi_bar_achieved"])
 
     # -- sampling ----------------------------------------------------------------------------
     def _sample(self) -> None:
-        core = self.sim._sim
+        core = self.core
         x, v, w = core.positions(), core.velocities(), core.angular_velocities()
         s_c, power = core.particle_stats()
         m, inertia, r = self._m, self._inertia, self._d / 2
@@ -338,9 +347,10 @@ class Channel:
         }
         if self._win is None:
             self._win = {"t0": core.time, "n": 0, **{k: np.zeros_like(a) for k, a in acc.items()}}
+        win = self._win
         for k, a in acc.items():
-            self._win[k] += a
-        self._win["n"] += 1
+            win[k] += a
+        win["n"] += 1
         # time series
         mt = float(m.sum())
         e = core.energies()
@@ -361,8 +371,9 @@ class Channel:
             "wall_impulse_x": float(wi[:, 0].sum()), "wall_impulse_y": float(wi[:, 1].sum()),
             "wall_impulse_z": float(wi[:, 2].sum()),
         })
-        if self._win["n"] >= self.window:
-            self._close_window(core.time)
+        if win["n"] >= self.window:
+            self._win = None
+            self._close_window(win, core.time)
 
     @staticmethod
     def _contact_stress_bins(core: Any, x: np.ndarray, s_c: np.ndarray,
@@ -400,9 +411,8 @@ class Channel:
                 out[:, c] += np.bincount(k, weights=w * full[:, c], minlength=nb)
         return out
 
-    def _close_window(self, t1: float) -> None:
-        a = self._win
-        self._win = None
+    def _close_window(self, a: dict[str, Any], t1: float) -> None:
+        """Append the bins rows of the window of sums ``a`` closed at time ``t1``."""
         ns = a["n"]
         edges = self._edges
         nb = len(edges) - 1
@@ -449,24 +459,31 @@ class Channel:
         self._window_index += 1
 
     # -- protocol ----------------------------------------------------------------------------
-    def run(self, steps: int, progress: bool | None = None, checkpoint: str | None = None,
+    def run(self, steps: int, progress: bool | None = None,
+            checkpoint: str | os.PathLike[str] | None = None,
             checkpoint_every: int | None = None) -> None:
-        """Advance ``steps`` steps, sampling every ``sample_every`` steps."""
-        if self.sim is None:
-            self.prepare(progress=progress)
-        core = self.sim._sim
-        target = core.step + int(steps)
-        while core.step < target:
-            to_sample = self.sample_every - core.step % self.sample_every
-            c = min(to_sample, target - core.step)
-            if c > 1:
-                self.sim.run(c - 1, progress=progress, checkpoint=checkpoint)
-            if core.step % self.sample_every == self.sample_every - 1:
-                core.request_stats()
-                self.sim.run(1, progress=False)
-                self._sample()
-            elif core.step < target:
-                self.sim.run(1, progress=False)
+        """Advance ``steps`` steps (preparing first if needed), sampling every
+        ``sample_every`` steps; ``checkpoint`` and ``checkpoint_every`` as
+        :class:`granflow.scenes.Scene` says."""
+        self.prepare(progress=progress)
+        sim = self._simulation()
+        core = sim.core
+
+        def advance(steps: int) -> None:
+            target = core.step + int(steps)
+            while core.step < target:
+                to_sample = self.sample_every - core.step % self.sample_every
+                c = min(to_sample, target - core.step)
+                if c > 1:
+                    sim.run(c - 1, progress=progress)
+                if core.step % self.sample_every == self.sample_every - 1:
+                    core.request_stats()
+                    sim.run(1, progress=False)
+                    self._sample()
+                elif core.step < target:
+                    sim.run(1, progress=False)
+
+        run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
     def tables(self) -> dict[str, pa.Table]:
         out = {}
@@ -486,12 +503,13 @@ class Channel:
     def summary(self) -> dict[str, Any]:
         """The paper's analysis (granflow.analysis.channel.summary) flattened to scalars."""
         from granflow.analysis import channel as ach
+        from granflow.analysis.channel_profiles import flow_state
 
         t = self.tables()
         out: dict[str, Any] = {"n": self.prep_info.get("n"),
                                "phi_bar_achieved": self.prep_info.get("phi_bar_achieved")}
         if "series" in t:
-            fs = ach.flow_state(t["series"])
+            fs = flow_state(t["series"])
             out["flow_state"] = fs.state
         if "bins" not in t or t["bins"].num_rows == 0:
             return out
@@ -508,18 +526,17 @@ class Channel:
                 out[k] = v
         return out
 
-    def save_checkpoint(self, path: str | os.PathLike) -> None:
+    def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
         from granflow.io import atomic_path
 
-        if self.sim is None:
-            self.prepare()
+        self.prepare()
         # the preparation record rides beside the kernel checkpoint (written first: a
         # checkpoint never exists without it)
         with atomic_path(f"{os.fspath(path)}.prep.json") as tmp:
             tmp.write_text(json.dumps(self.prep_info))
-        self.sim.save_checkpoint(path)
+        self._simulation().save_checkpoint(path)
 
-    def restore(self, path: str | os.PathLike) -> None:
+    def restore(self, path: str | os.PathLike[str]) -> None:
         self.sim = Simulation.from_checkpoint(path, threads=self.threads)
         prep = f"{os.fspath(path)}.prep.json"
         if os.path.exists(prep):

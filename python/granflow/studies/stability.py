@@ -1,7 +1,7 @@
-"""Stability suite (issue #5, "Stability"): a registry of small runs at the edges of the
-parameter space, each recorded as one row of a table.
+"""Stability suite: a registry of small runs at the edges of the parameter space, each
+recorded as one row of a table.
 
-    python -m granflow.stability [--fast | --all] [--case NAME ...] [--out DIR]
+    python -m granflow.studies.stability [--fast | --all] [--case NAME ...] [--out DIR]
 
 runs the selected cases (default ``--fast``: the CI cases, seconds each; ``--all`` adds the long
 ones meant for benchmarks/), prints the table and writes ``DIR/stability.parquet``. The exit
@@ -25,7 +25,7 @@ nan_free, measured, n, steps, sim_time.
   ``dissipation`` D = W - delta_energy (inferred), ``energy_balance`` = D / max(E_start, E_end,
   |W|), and ``energy_ok`` is False when ``energy_balance < -tol`` (energy created beyond the
   case's tolerance: an energy-balance violation). Null when the case has no source-work model.
-* The cell (002) reports its own ledger (:func:`granflow.cell.energy_balance`, sampled every
+* The cell (002) reports its own ledger (:func:`granflow.scenes.cell.energy_balance`, sampled every
   step over the last ``CELL_LEDGER_TC`` contact times of the run): ``work`` is the imposed
   stress's work -p_ext dV + tau_ext V L_xy dt, E includes the cell's kinetic energy,
   ``energy_balance`` = D / max(|W|, |D|, gross contact work) (the cell stores little energy;
@@ -57,8 +57,9 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import polars as pl
@@ -67,11 +68,14 @@ import pyarrow as pa
 from granflow.errors import ConfigurationError, InstabilityError, ParameterError
 from granflow.simulation import Box, ContactLaw, Simulation, maxwell_velocities, random_packing
 from granflow.sizes import mono, uniform
-from granflow.timestep import collision_law, contact_time, head_on_collision
+from granflow.studies.timestep import collision_law, contact_time, head_on_collision
+
+if TYPE_CHECKING:
+    from granflow.scenes import Scene
 
 MAX_OVERLAP = 0.25
 
-#: the small cell of the cell cases (granflow.cell.ShearCell parameters; units a, kn, t_c)
+#: the small cell of the cell cases (granflow.scenes.cell.ShearCell parameters; units a, kn, t_c)
 SMALL_CELL: dict[str, Any] = {"N": 200, "phi0": 0.3}
 #: the cell's energy ledger covers the last this many contact times of a run (every step)
 CELL_LEDGER_TC = 100.0
@@ -116,7 +120,7 @@ class Outcome:
     state: str = ""
     n: int = 0
     steps: int = 0
-    #: a ledger of the case's own (e.g. the cell's :class:`granflow.cell.EnergyBalance`
+    #: a ledger of the case's own (e.g. the cell's :class:`granflow.scenes.cell.EnergyBalance`
     #: as a dict); replaces the trace's source-work model when given
     balance: dict[str, float] | None = None
 
@@ -214,7 +218,7 @@ def drive(
     chunks, sampling time, energy, source power, max overlap and centre-of-mass velocity before
     the first and after every chunk. ``guard()`` is called after every chunk; a message from it
     stops the run with :class:`Runaway`. Returns the trace and whether everything is finite."""
-    core = obj._sim
+    core = obj.core
     m = np.asarray(core.masses(), dtype=float)
     g = _gravity(obj)
     tr = Trace()
@@ -296,17 +300,21 @@ def _overlap_pair(overlap: float) -> Outcome:
                    measured={"v_sep": float(v[1, 0] - v[0, 0])})
 
 
+def _collision_case(*law_args: Any, **law_kw: Any) -> Outcome:
+    return _collision(collision_law(*law_args, **law_kw))
+
+
 def _register_kernel_cases() -> None:
     for kn in (1e5, 1e6, 1e7, 1e8, 1e9, 1e10):
         register(Case(
             f"collision_kn_{kn:.0e}", "kn", "fast",
-            lambda kn=kn: _collision(collision_law(0.82, kn)), e_n=0.82,
+            partial(_collision_case, 0.82, kn), e_n=0.82,
             description=f"head-on binary collision, hooke, kn = {kn:g}, e_n = 0.82, dt = t_c/50",
         ))
     for e in (0.05, 0.2, 0.5, 0.82, 1.0):
         register(Case(
             f"collision_e_n_{e:g}", "e_n", "fast",
-            lambda e=e: _collision(collision_law(e, 1e6)), e_n=e,
+            partial(_collision_case, e, 1e6), e_n=e,
             description=f"head-on binary collision, hooke, kn = 1e6, e_n = {e:g}",
         ))
     register(Case(
@@ -327,12 +335,12 @@ def _register_kernel_cases() -> None:
     ))
     for mu in (0.0, 0.001, 10.0):
         register(Case(
-            f"gas_mu_{mu:g}", "mu", "fast", lambda mu=mu: _gas(mu=mu),
+            f"gas_mu_{mu:g}", "mu", "fast", partial(_gas, mu=mu),
             description=f"periodic gas phi = 0.3, kn = 1e5, e_n = 0.82, mu = {mu:g}",
         ))
     for label, sz in (("mono", None), ("0.9-1.1", (0.9, 1.1)), ("ratio_3", (0.5, 1.5))):
         register(Case(
-            f"gas_poly_{label}", "polydispersity", "fast", lambda sz=sz: _gas(sizes=sz),
+            f"gas_poly_{label}", "polydispersity", "fast", partial(_gas, sizes=sz),
             description=f"periodic gas phi = 0.3, mu = 0.5, diameters {sz or 'all 1'}",
         ))
     register(Case(
@@ -350,7 +358,7 @@ def _register_kernel_cases() -> None:
 # --------------------------------------------------------------------------------------------
 # scene cases (channel 000, cell 002)
 # --------------------------------------------------------------------------------------------
-def _scene(name: str) -> type:
+def _scene(name: str) -> type[Scene]:
     from granflow.scenes import get_scene
 
     try:
@@ -363,11 +371,12 @@ SMALL_CHANNEL: dict[str, Any] = {"W": 10.0, "H": 10.0, "B": 4.0}
 
 
 def _channel(params: Mapping[str, Any], sim_time: float, n_samples: int = 50) -> Outcome:
-    from granflow.analysis.channel import flow_state
+    from granflow.analysis.channel_profiles import flow_state
 
     cls = _scene("channel")
     ch = cls.from_spec({**SMALL_CHANNEL, **params}, seed=0)
-    core = ch._sim  # prepares (fill and release)
+    ch.prepare()  # fill and release
+    core = ch.core
     steps = max(1, round(sim_time / core.dt))
     tr, fin = drive(ch, steps, n_samples)
     vy = np.array([v[1] for v in tr.vcm])
@@ -381,12 +390,12 @@ def _cell(p: float, tau_over_p: float, time_tc: float = 2000.0,
           ledger_tc: float = CELL_LEDGER_TC) -> Outcome:
     """The stress-controlled cell (002) at ``p_ext`` = p (units kn/a) and tau_ext/p_ext, run
     for ``time_tc`` contact times from its dilute start (records mu1, phi, I over the second
-    half), then ``ledger_tc`` more with the energy ledger (granflow.cell.energy_balance)."""
-    from granflow.cell import energy_balance as cell_energy_balance
+    half), then ``ledger_tc`` more with the energy ledger (granflow.scenes.cell.energy_balance)."""
+    from granflow.scenes.cell import ShearCell
+    from granflow.scenes.cell import energy_balance as cell_energy_balance
 
-    cls = _scene("cell")
-    cell = cls.from_spec({**SMALL_CELL, "p_ext": p, "tau_ratio": tau_over_p}, seed=0)
-    core = cell._sim
+    cell = ShearCell.from_spec({**SMALL_CELL, "p_ext": p, "tau_ratio": tau_over_p}, seed=0)
+    core = cell.core
     t_c = float(getattr(cell, "t_c", core.contact_time))
     steps = max(1, round(time_tc * t_c / core.dt))
     vs = float(np.sum(np.pi * np.asarray(core.diameters()) ** 3 / 6))
@@ -419,7 +428,7 @@ def _register_scene_cases() -> None:
         dt = 1.2e-4 * math.sqrt(1e6 / kn)
         register(Case(
             f"channel_kn_{kn:.0e}", "kn", "long",
-            lambda kn=kn, dt=dt: _channel({"kn": kn, "dt": dt, "phi_bar": 0.58}, 20.0),
+            partial(_channel, {"kn": kn, "dt": dt, "phi_bar": 0.58}, 20.0),
             energy_tol=2e-2, scene="channel",
             description=f"channel W=10, H=10, B=4, phi_bar = 0.58 (flows at kn = 1e6), "
                         f"kn = {kn:g}, dt = {dt:.2e}, t = 20 sqrt(d/g)",
@@ -449,7 +458,7 @@ def _register_scene_cases() -> None:
             above = r > 1.0
             register(Case(
                 f"cell_p_{p:.0e}_tau_{r:g}", "cell", "long",
-                lambda p=p, r=r: _cell(p, r, 2000.0 if p >= 1e-3 else 20000.0), scene="cell",
+                partial(_cell, p, r, 2000.0 if p >= 1e-3 else 20000.0), scene="cell",
                 expect="unstable" if above else "finish",
                 refuse_with=(InstabilityError,) if above else (),
                 description=f"stress-controlled cell N = 200, p_ext a/kn = {p:g}, "
@@ -653,7 +662,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Command line: see the module docstring."""
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m granflow.stability",
+    ap = argparse.ArgumentParser(prog="python -m granflow.studies.stability",
                                  description="granflow stability suite")
     g = ap.add_mutually_exclusive_group()
     g.add_argument("--fast", action="store_const", dest="which", const="fast",

@@ -1,13 +1,5 @@
-"""Scenes: the papers' set-ups with their defaults, built from a few parameters.
-
-- :class:`granflow.channel.Channel` — vertical channel of 000 (Debnath, Kesava Rao & Kumaran).
-- :class:`granflow.cell.ShearCell` — stress-controlled triclinic cell of 002 (Srivastava et al.).
-- :class:`PeriodicGas` — a periodic box of spheres (kernel checks, benchmarks, quick tests).
-
-Every scene follows one protocol, so the runner, the CLI and the study helpers treat them alike:
-``from_spec(params, seed)``, ``run(steps, ...)``, ``tables()`` (pyarrow tables by name),
-``summary()``, ``parameters()``, ``save_checkpoint(path)`` / ``from_checkpoint(path)``.
-"""
+"""A periodic box of polydisperse spheres with random velocities (no walls, no gravity): kernel
+checks, benchmarks and quick tests of the runner and the CLI (``scene = "gas"``)."""
 
 from __future__ import annotations
 
@@ -19,40 +11,11 @@ from typing import Any, ClassVar
 import numpy as np
 import pyarrow as pa
 
-from granflow.errors import ParameterError
+from granflow import _core
 from granflow.simulation import Box, ContactLaw, Simulation, maxwell_velocities, random_packing
 from granflow.sizes import uniform
 
-SCENES: dict[str, type] = {}
-
-
-def register(name: str):
-    def deco(cls: type) -> type:
-        SCENES[name] = cls
-        cls.scene_name = name
-        return cls
-
-    return deco
-
-
-def check_keys(section: str, given: Mapping[str, Any], allowed: Mapping[str, Any]) -> None:
-    """Refuse unknown keys with a message naming the key and the allowed ones."""
-    for k in given:
-        if k not in allowed:
-            raise ParameterError(
-                f"invalid {section}.{k}: unknown key: allowed one of {sorted(allowed)}"
-            )
-
-
-def get_scene(name: str) -> type:
-    # the papers' scenes register themselves on import
-    if name == "channel":
-        import granflow.channel  # noqa: F401
-    elif name == "cell":
-        import granflow.cell  # noqa: F401
-    if name not in SCENES:
-        raise ParameterError(f"invalid scene = {name!r}: allowed one of {sorted(SCENES)}")
-    return SCENES[name]
+from ._base import check_keys, register, run_with_checkpoints
 
 
 @register("gas")
@@ -86,13 +49,19 @@ class PeriodicGas:
             threads=self.threads,
         )
         self._rows: list[dict[str, float]] = []
+        self.pbc = (True, True, True)
 
     @property
-    def _sim(self):
-        return self.sim._sim
+    def core(self) -> _core.Sim:
+        """The kernel simulation."""
+        return self.sim.core
+
+    def prepare(self, progress: bool | None = None) -> None:
+        """Nothing to do: the gas is ready when built."""
 
     @classmethod
-    def from_spec(cls, params: Mapping[str, Any], seed: int = 0, threads: int | None = None):
+    def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
+                  threads: int | None = None) -> PeriodicGas:
         check_keys("params", params, cls.__dataclass_fields__)
         return cls(**{**params, "seed": seed, "threads": threads})
 
@@ -109,17 +78,22 @@ class PeriodicGas:
             "max_overlap": dg["max_overlap"],
         })
 
-    def run(self, steps: int, progress: bool | None = None, checkpoint: str | None = None,
+    def run(self, steps: int, progress: bool | None = None,
+            checkpoint: str | os.PathLike[str] | None = None,
             checkpoint_every: int | None = None) -> None:
-        done = 0
-        while done < steps:
-            c = min(self.sample_every - self.sim.step % self.sample_every, steps - done)
-            self.sim.run(c, progress=progress, checkpoint=checkpoint)
-            done += c
-            if self.sim.step % self.sample_every == 0:
-                self._sample()
-            if checkpoint and checkpoint_every and self.sim.step % checkpoint_every == 0:
-                self.save_checkpoint(checkpoint)
+        """Advance ``steps`` steps, sampling every ``sample_every`` steps; ``checkpoint`` and
+        ``checkpoint_every`` as :class:`granflow.scenes.Scene` says."""
+
+        def advance(steps: int) -> None:
+            done = 0
+            while done < steps:
+                c = min(self.sample_every - self.sim.step % self.sample_every, steps - done)
+                self.sim.run(c, progress=progress)
+                done += c
+                if self.sim.step % self.sample_every == 0:
+                    self._sample()
+
+        run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
     def tables(self) -> dict[str, pa.Table]:
         if not self._rows:
@@ -137,8 +111,8 @@ class PeriodicGas:
         return {"n": self.sim.n, "steps": self.sim.step, "ke_trans_mean": float(ke.mean()),
                 "ke_trans_last": float(ke[-1])}
 
-    def save_checkpoint(self, path: str | os.PathLike) -> None:
+    def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
         self.sim.save_checkpoint(path)
 
-    def restore(self, path: str | os.PathLike) -> None:
+    def restore(self, path: str | os.PathLike[str]) -> None:
         self.sim = Simulation.from_checkpoint(path, threads=self.threads)

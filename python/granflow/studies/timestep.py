@@ -1,4 +1,4 @@
-"""Discretisation error: timestep (work-precision) studies (issue #5, part 2).
+"""Discretisation error: timestep (work-precision) studies.
 
 The same short scene is run at ``dt = t_c / f`` for ``f`` in ``fracs`` (default 10, 20, 50, 100,
 200; ``t_c`` is the contact time of the stiffest, lightest pair of the linear law, as used by the
@@ -17,7 +17,7 @@ spent:
   :class:`granflow.Simulation` built by a factory taking ``dt``; deviations are from the finest
   run.
 * :func:`sheared_packing_study` — :func:`scene_study` on a sheared packing in the
-  stress-controlled cell (``granflow.cell.ShearCell``): steady averages with their SEs; a
+  stress-controlled cell (``granflow.scenes.cell.ShearCell``): steady averages with their SEs; a
   clear :class:`granflow.GranflowError` if that scene is not available in this build.
 * :func:`work_precision_plot` — |deviation| against wall time, one line per observable.
 
@@ -34,7 +34,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import polars as pl
@@ -42,6 +42,9 @@ import polars as pl
 from granflow.errors import GranflowError, ParameterError
 from granflow.simulation import Box, ContactLaw, Simulation
 from granflow.simulation import contact_time as simulation_contact_time
+
+if TYPE_CHECKING:
+    from granflow.scenes import Scene
 
 DEFAULT_FRACS: tuple[int, ...] = (10, 20, 50, 100, 200)
 
@@ -76,8 +79,12 @@ def _check_fracs(fracs: Sequence[float]) -> list[float]:
 
 
 def _core(obj: Any) -> Any:
-    """The kernel handle of a Simulation or a scene."""
-    return obj._sim
+    """The kernel handle of a Simulation or a scene (its ``core``; a scene is prepared first,
+    :meth:`granflow.scenes.Scene.prepare` does nothing when it is prepared already)."""
+    prepare = getattr(obj, "prepare", None)
+    if callable(prepare):
+        prepare()
+    return obj.core
 
 
 # --------------------------------------------------------------------------------------------
@@ -151,7 +158,7 @@ def head_on_collision(
     v = np.array([[v0 * m2 / (m1 + m2), 0, 0], [-v0 * m1 / (m1 + m2), 0, 0]])
     sim = Simulation(x, dd, Box(length=(L, L, L), periodic=(False,) * 3), law, density=density,
                      velocities=v, dt=dt)
-    core = sim._sim
+    core = sim.core
     e0 = sum(sim.energies().values())
     chunk = max(1, int(0.25 * t_c / dt))
     max_steps = int((gap / v0 + max_contact_tc * t_c) / dt) + 1
@@ -253,10 +260,10 @@ T_FROM = "_timestep_study_t_from"
 def series_mean(column: str) -> Observable:
     """Observable: mean of ``column`` of the scene's ``series`` table over the samples of the
     timed run (after the time stored by :func:`scene_study` in ``scene._timestep_study_t_from``)
-    with its blocking standard error (:func:`granflow.analysis.errors.blocking`)."""
+    with its blocking standard error (:func:`granflow.analysis.stats.blocking`)."""
 
     def fn(scene: Any) -> tuple[float, float]:
-        from granflow.analysis.errors import blocking
+        from granflow.analysis.stats import blocking
 
         tabs = scene.tables()
         if "series" not in tabs or column not in tabs["series"].column_names:
@@ -305,7 +312,7 @@ def scene_study(
     ----------
     factory
         ``factory(dt)`` builds the scene (anything with ``run(steps, progress=...)`` and
-        ``_sim``, e.g. a scene of :mod:`granflow.scenes` or a :class:`granflow.Simulation`);
+        ``core``, e.g. a scene of :mod:`granflow.scenes` or a :class:`granflow.Simulation`);
         ``factory(None)`` builds it with its default timestep (used to read ``t_c`` when not
         given). It must start from the same state whatever ``dt``.
     observables
@@ -317,7 +324,7 @@ def scene_study(
     steps_time
         Simulated time of every run (``steps = round(steps_time / dt)``).
     t_c
-        Contact time (default: ``factory(None)._sim.contact_time``).
+        Contact time (default: ``factory(None).core.contact_time``).
     prepare
         Called on the scene before the timed run (e.g. a preparation or warm-up at that
         ``dt``); samples up to the end of it are not averaged by :func:`series_mean`.
@@ -403,15 +410,15 @@ def kinetic_energy(obj: Any) -> float:
         e["kinetic_translational"] + e["kinetic_rotational"])
 
 
-def _cell_class() -> type:
-    try:
-        from granflow.scenes import get_scene
+def _cell_class() -> type[Scene]:
+    from granflow.scenes import get_scene
 
+    try:
         return get_scene("cell")
-    except ModuleNotFoundError as exc:
+    except (ModuleNotFoundError, ParameterError) as exc:
         raise GranflowError(
             "the sheared-packing timestep study needs the stress-controlled cell "
-            "(granflow.cell.ShearCell), which is not available in this build"
+            "(granflow.scenes.cell.ShearCell), which is not available in this build"
         ) from exc
 
 
@@ -427,7 +434,7 @@ def sheared_packing_study(
     threads: int | None = None,
 ) -> pl.DataFrame:
     """:func:`scene_study` on a sheared packing in the stress-controlled cell
-    (``granflow.cell.ShearCell``, paper 002, whose ``dt = dt_frac t_c`` with 002's ``t_c``).
+    (``granflow.scenes.cell.ShearCell``, paper 002, whose ``dt = dt_frac t_c`` with 002's ``t_c``).
 
     Every timestep ``t_c/f`` runs the same scene (same seed: the same dilute start) at
     ``dt_frac = 1/f``: ``warmup_tc`` contact times of compaction and start-up of the shear
@@ -453,7 +460,7 @@ def sheared_packing_study(
         raise GranflowError(
             f"the kernel in this build has no cell support yet ({exc}): rebuild granflow"
         ) from exc
-    t_c = float(getattr(probe, "t_c", None) or probe._sim.contact_time)
+    t_c = float(getattr(probe, "t_c", None) or probe.core.contact_time)
 
     def factory(dt: float | None) -> Any:
         p = dict(base)
@@ -465,7 +472,7 @@ def sheared_packing_study(
     def warm(scene: Any) -> None:
         # a whole number of samples, so that the timed run samples at the same times
         every = int(getattr(scene, "sample_every", 1))
-        n = round(warmup_tc * t_c / scene._sim.dt)
+        n = round(warmup_tc * t_c / scene.core.dt)
         scene.run(every * math.ceil(n / every), progress=False)
 
     return scene_study(factory, observables, fracs, time_tc * t_c, t_c=t_c, prepare=warm)
@@ -498,14 +505,15 @@ def format_table(table: pl.DataFrame) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m granflow.timestep [--out DIR]``: binary-collision studies (linear and Hertz
-    laws; equal spheres and a 1 : 1.2 pair, whose contact is not a whole number of steps);
+    """``python -m granflow.studies.timestep [--out DIR]``: binary-collision studies (linear and
+    Hertz laws; equal spheres and a 1 : 1.2 pair, whose contact is not a whole number of steps);
     prints the tables and writes Parquet and PNG when ``--out`` is given."""
     import argparse
 
     from granflow.io import write_parquet
 
-    ap = argparse.ArgumentParser(prog="python -m granflow.timestep", description=main.__doc__)
+    ap = argparse.ArgumentParser(prog="python -m granflow.studies.timestep",
+                                 description=main.__doc__)
     ap.add_argument("--out", default=None, help="directory for timestep_*.parquet / .png")
     ap.add_argument("--e-n", type=float, default=0.82)
     ap.add_argument("--kn", type=float, default=1e6)

@@ -1,4 +1,4 @@
-"""Tests of granflow.analysis.errors on synthetic series with known answers."""
+"""Tests of granflow.analysis.stats and .binned on synthetic series with known answers."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 import pytest
-from granflow.analysis import errors as E
+from granflow.analysis import binned as P
 from granflow.analysis import plots
+from granflow.analysis import stats as S
 from scipy.signal import lfilter
 
 
@@ -29,7 +30,7 @@ def ar1_se(a: float, n: int, sigma_e: float = 1.0) -> float:
 def test_blocking_long_ar1_matches_analytic_se_and_tau():
     a, n, dt = 0.9, 2**17, 0.1
     x = 5.0 + ar1(a, n, seed=11)
-    b = E.blocking(x, dt)
+    b = S.blocking(x, dt)
     se_true = ar1_se(a, n)
     tau_true = dt * (1 + a) / (1 - a) / 2  # dt (1/2 + sum rho_k)
     assert b.converged
@@ -44,16 +45,16 @@ def test_blocking_long_ar1_matches_analytic_se_and_tau():
 
 def test_blocking_short_correlated_series_is_not_converged():
     x = ar1(0.99, 256, seed=3)  # tau ~ 100 samples: far too short
-    b = E.blocking(x)
+    b = S.blocking(x)
     assert not b.converged
-    mean, se, tau, converged, n = E.mean_se(x)
+    mean, se, tau, converged, n = S.mean_se(x)
     assert converged is False and n == 256 and se == pytest.approx(b.se)
 
 
 def test_uncorrelated_series():
     rng = np.random.default_rng(5)
     x = rng.normal(size=4000)
-    res = E.mean_se(x, dt=2.0)
+    res = S.mean_se(x, dt=2.0)
     assert res.converged
     assert abs(res.se * np.sqrt(4000) - 1.0) < 0.1
     assert abs(res.tau - 1.0) < 0.3  # dt / 2
@@ -62,12 +63,12 @@ def test_uncorrelated_series():
 def test_blocking_many_vectorised_matches_single_and_handles_nan():
     cols = np.column_stack([ar1(0.5, 4096, s) for s in range(3)])
     cols[10, 2] = np.nan
-    many = E.blocking_many(cols, 0.5)
+    many = S.blocking_many(cols, 0.5)
     for j in range(2):
-        one = E.blocking(cols[:, j], 0.5)
+        one = S.blocking(cols[:, j], 0.5)
         assert many.se[j] == pytest.approx(one.se)
         assert many.tau[j] == pytest.approx(one.tau)
-    one = E.blocking(cols[:, 2], 0.5)  # NaN sample dropped
+    one = S.blocking(cols[:, 2], 0.5)  # NaN sample dropped
     assert many.n[2] == 4095 and many.se[2] == pytest.approx(one.se)
 
 
@@ -75,7 +76,7 @@ def test_ratio_se_linearisation():
     rng = np.random.default_rng(2)
     a = 2.0 + 0.1 * rng.normal(size=20000)
     b = 4.0 + 0.1 * rng.normal(size=20000)
-    r = E.ratio_se(a, b)
+    r = S.ratio_se(a, b)
     se_delta = 0.5 * np.sqrt((0.1 / 2) ** 2 + (0.1 / 4) ** 2) / np.sqrt(20000)
     assert r.mean == pytest.approx(0.5, abs=4 * se_delta)
     assert abs(r.se / se_delta - 1) < 0.15
@@ -85,10 +86,10 @@ def test_steady_state_start_skips_transient():
     rng = np.random.default_rng(7)
     t = np.arange(4000) * 0.5
     x = 5.0 * np.exp(-t / 50.0) + rng.normal(size=t.size)
-    st = E.steady_state_start(t, x)
+    st = S.steady_state_start(t, x)
     assert st.settled
     assert 100.0 < st.t_start < 600.0
-    steady = E.mean_se(x[st.index :])
+    steady = S.mean_se(x[st.index :])
     # the transient biases the plain average by ~0.12, 8x the error of the stationary noise
     assert abs(np.mean(x)) > 4 / np.sqrt(x.size)
     assert abs(steady.mean) < 4 * steady.se and steady.converged
@@ -97,9 +98,9 @@ def test_steady_state_start_skips_transient():
 def test_steady_state_start_stationary_and_drifting():
     rng = np.random.default_rng(8)
     t = np.arange(3000.0)
-    st = E.steady_state_start(t, rng.normal(size=t.size))
+    st = S.steady_state_start(t, rng.normal(size=t.size))
     assert st.settled and st.index < 300
-    ramp = E.steady_state_start(t, 0.01 * t + rng.normal(size=t.size))
+    ramp = S.steady_state_start(t, 0.01 * t + rng.normal(size=t.size))
     assert not ramp.settled
 
 
@@ -107,7 +108,7 @@ def test_se_vs_time_fit_and_time_to_reach():
     a, n, dt = 0.5, 2**15, 0.01
     x = ar1(a, n, seed=4)
     t = np.arange(n) * dt
-    res = E.se_vs_time(t, x, wall_time_per_unit_t=3.0, start=0)
+    res = S.se_vs_time(t, x, wall_time_per_unit_t=3.0, start=0)
     var, g = 1 / (1 - a * a), (1 + a) / (1 - a)
     C_true = np.sqrt(var * g * dt)  # SE = C / sqrt(T)
     assert not res.too_short
@@ -125,7 +126,7 @@ def test_se_vs_time_fit_and_time_to_reach():
 
 def test_se_vs_time_flags_short_data():
     x = ar1(0.99, 300, seed=9)
-    res = E.se_vs_time(np.arange(300.0), x, start=0)
+    res = S.se_vs_time(np.arange(300.0), x, start=0)
     assert res.too_short
     assert not res.time_to_reach(0.01)["reliable"]
     assert res.time_to_reach(0.01)["wall_time"] is None
@@ -154,7 +155,7 @@ def test_profile_se_per_bin_whole_profile_and_input_types():
     sig = np.linspace(0.01, 0.05, 12)
     nw = 256
     d = _bins_table(nw, sig, seed=1)
-    pe = E.profile_se(d, ["u_y"], start_window=0)
+    pe = P.profile_se(d, ["u_y"], start_window=0)
     se = pe.table["u_y_se"].to_numpy()
     assert np.all(np.abs(se / (sig / np.sqrt(nw)) - 1) < 0.3)
     rms_true = np.sqrt(np.mean(sig**2)) / np.sqrt(nw)
@@ -165,14 +166,14 @@ def test_profile_se_per_bin_whole_profile_and_input_types():
     assert pe.whole["u_y"]["frac_converged"] == 1.0
     # pyarrow and polars inputs give identical results
     for tab in (pa.table(d), pl.DataFrame(d)):
-        other = E.profile_se(tab, ["u_y"], start_window=0)
+        other = P.profile_se(tab, ["u_y"], start_window=0)
         np.testing.assert_allclose(other.table["u_y_se"].to_numpy(), se)
 
 
 def test_profile_se_vs_time():
     sig = np.full(8, 0.04)
     d = _bins_table(512, sig, seed=2)
-    res = E.profile_se_vs_time(pl.DataFrame(d), "u_y", wall_time_per_unit_t=0.2, start_window=0)
+    res = P.profile_se_vs_time(pl.DataFrame(d), "u_y", wall_time_per_unit_t=0.2, start_window=0)
     assert not res.too_short
     # rms SE = sigma / sqrt(n_windows) = sigma sqrt(window) / sqrt(T): C = sigma sqrt(10)
     assert abs(res.C / (0.04 * np.sqrt(10.0)) - 1) < 0.15
@@ -181,7 +182,7 @@ def test_profile_se_vs_time():
 
 def test_plots_se_vs_time_and_work_precision(tmp_path):
     x = ar1(0.5, 2**13, seed=1)
-    res = E.se_vs_time(np.arange(x.size) * 0.1, x, wall_time_per_unit_t=0.5, start=0)
+    res = S.se_vs_time(np.arange(x.size) * 0.1, x, wall_time_per_unit_t=0.5, start=0)
     p1 = plots.plot_se_vs_time({"obs": res}, tmp_path / "se.png")
     wp = pl.DataFrame(
         {
@@ -205,7 +206,7 @@ def test_time_to_reach_agrees_with_the_measured_error():
     slow = np.repeat(rng.normal(size=n // 512), 512)
     x = ar1(0.3, n, seed=12) + 0.5 * slow
     t = np.arange(n) * dt
-    res = E.se_vs_time(t, x, start=0)
+    res = S.se_vs_time(t, x, start=0)
     se_last, T_last = res.table["se"][-1], res.table["T"][-1]
     target = 0.5 * se_last
     need = res.time_to_reach(target)

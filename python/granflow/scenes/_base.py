@@ -1,0 +1,131 @@
+"""What every scene shares: the scene table, the key check, the :class:`Scene` protocol and the
+run loop that honours ``checkpoint`` / ``checkpoint_every``.
+
+The scene modules (:mod:`granflow.scenes.channel`, :mod:`granflow.scenes.cell`,
+:mod:`granflow.scenes.gas`) import from here and :mod:`granflow.scenes` imports them, so the
+imports run one way.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
+
+import pyarrow as pa
+
+from granflow import _core
+from granflow.errors import ParameterError
+
+SCENES: dict[str, type] = {}
+
+_T = TypeVar("_T", bound=type)
+
+
+def register(name: str) -> Callable[[_T], _T]:
+    """Class decorator: enter a scene class in the scene table under ``name`` (the TOML
+    ``scene = ...`` key) and set its ``scene_name``."""
+
+    def deco(cls: _T) -> _T:
+        SCENES[name] = cls
+        cls.scene_name = name  # type: ignore[attr-defined]  # declared as a ClassVar on scenes
+        return cls
+
+    return deco
+
+
+def check_keys(section: str, given: Mapping[str, Any], allowed: Mapping[str, Any] | set[str]
+               ) -> None:
+    """Refuse unknown keys with a message naming the key and the allowed ones."""
+    for k in given:
+        if k not in allowed:
+            raise ParameterError(
+                f"invalid {section}.{k}: unknown key: allowed one of {sorted(allowed)}"
+            )
+
+
+@runtime_checkable
+class Scene(Protocol):
+    """The contract every scene keeps, so the runner, the CLI and the studies treat them alike.
+
+    * ``from_spec(params, seed, threads)`` builds a scene from the ``params`` of a TOML spec;
+      ``parameters()`` gives back every parameter (defaults included) for the tables' metadata.
+    * ``prepare()`` makes the kernel simulation (a scene with a preparation protocol, like the
+      channel's fill and release, runs it here); it is idempotent, and ``run`` calls it.
+    * ``core`` is the kernel simulation (:class:`granflow._core.Sim`) of a prepared scene.
+    * ``run(steps, progress, checkpoint, checkpoint_every)`` advances ``steps`` steps; with
+      ``checkpoint`` set it writes the scene's checkpoint there every ``checkpoint_every``
+      steps (at multiples of it in the step count), at the end, and when interrupted (Ctrl-C,
+      SIGTERM) before the interrupt propagates.
+    * ``tables()`` are the sample tables by name; ``load_tables`` takes them back on a restart;
+      ``summary()`` is the scene's analysis flattened to scalars (with standard errors).
+    * ``save_checkpoint(path)`` / ``restore(path)``: the kernel state, bitwise.
+    """
+
+    scene_name: ClassVar[str]
+    #: periodic axes (x, y, z), for snapshots
+    pbc: tuple[bool, bool, bool]
+
+    @classmethod
+    def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
+                  threads: int | None = None) -> Scene: ...
+
+    def parameters(self) -> dict[str, Any]: ...
+
+    def prepare(self, progress: bool | None = None) -> None: ...
+
+    @property
+    def core(self) -> _core.Sim: ...
+
+    def run(self, steps: int, progress: bool | None = None,
+            checkpoint: str | os.PathLike[str] | None = None,
+            checkpoint_every: int | None = None) -> None: ...
+
+    def tables(self) -> dict[str, pa.Table]: ...
+
+    def load_tables(self, tables: Mapping[str, pa.Table]) -> None: ...
+
+    def summary(self) -> dict[str, Any]: ...
+
+    def save_checkpoint(self, path: str | os.PathLike[str]) -> None: ...
+
+    def restore(self, path: str | os.PathLike[str]) -> None: ...
+
+
+def run_with_checkpoints(
+    scene: Scene,
+    steps: int,
+    advance: Callable[[int], None],
+    checkpoint: str | os.PathLike[str] | None,
+    checkpoint_every: int | None,
+) -> None:
+    """Advance a prepared ``scene`` by ``steps`` steps with ``advance(n)`` (the scene's own
+    stepping and sampling) and write its checkpoint as :class:`Scene` says: every
+    ``checkpoint_every`` steps, at the end and on an interrupt."""
+    steps = int(steps)
+    if steps < 0:
+        raise ParameterError(f"invalid steps = {steps}: allowed >= 0")
+    if checkpoint_every is not None and int(checkpoint_every) < 1:
+        raise ParameterError(f"invalid checkpoint_every = {checkpoint_every}: allowed >= 1")
+    if checkpoint is None:
+        if checkpoint_every is not None:
+            raise ParameterError(
+                f"invalid checkpoint_every = {checkpoint_every} without checkpoint: allowed "
+                "with a checkpoint path")
+        advance(steps)
+        return
+    every = int(checkpoint_every) if checkpoint_every is not None else 0
+    core = scene.core
+    target = core.step + steps
+    try:
+        while core.step < target:
+            n = target - core.step
+            if every:
+                n = min(n, every - core.step % every)
+            advance(n)
+            if every and core.step % every == 0 and core.step < target:
+                scene.save_checkpoint(checkpoint)
+    except (KeyboardInterrupt, SystemExit):
+        scene.save_checkpoint(checkpoint)
+        raise
+    scene.save_checkpoint(checkpoint)

@@ -1,0 +1,121 @@
+"""The package's layout: imports run one way (the module import graph of python/granflow is
+acyclic), every module imports on its own, and module docstrings carry no issue numbers."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import re
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "python" / "granflow"
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in sorted(PKG.rglob("*.py"))}
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> the granflow modules it imports (anywhere in the file, function bodies
+    included: a lazy import closes a circle as well)."""
+    mods = _modules()
+    # submodules without Python source (the extension, known by its stub) are leaves
+    known = set(mods) | {_module_name(p) for p in PKG.rglob("*.pyi")}
+    graph: dict[str, set[str]] = {m: set() for m in mods}
+    for mod, path in mods.items():
+        is_pkg = path.name == "__init__.py"
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = mod.split(".")
+                    base = base[: len(base) - node.level + (1 if is_pkg else 0)]
+                    src = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    src = node.module or ""
+                targets = [f"{src}.{a.name}" if f"{src}.{a.name}" in known else src
+                           for a in node.names]
+            for t in targets:
+                if t in mods and t != mod:
+                    graph[mod].add(t)
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """A circle of the graph as a list of nodes (first == last), or None."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(n: str) -> list[str] | None:
+        state[n] = 1
+        stack.append(n)
+        for m in sorted(graph.get(n, ())):
+            if state.get(m) == 1:
+                return stack[stack.index(m):] + [m]
+            if m not in state:
+                found = visit(m)
+                if found:
+                    return found
+        stack.pop()
+        state[n] = 2
+        return None
+
+    for n in sorted(graph):
+        if n not in state:
+            found = visit(n)
+            if found:
+                return found
+    return None
+
+
+def test_cycle_finder_finds_circles():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b", "c"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_import_graph_sees_relative_and_lazy_imports():
+    g = import_graph()
+    assert "granflow.scenes._base" in g["granflow.scenes.channel"]  # relative import
+    assert "granflow.analysis.channel" in g["granflow.scenes.channel"]  # lazy, in a method
+    assert "granflow.scenes.channel" in g["granflow.scenes"]  # package __init__
+
+
+def test_imports_run_one_way():
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import circle: " + " -> ".join(cycle or [])
+
+
+@pytest.mark.parametrize("name", sorted(_modules()))
+def test_every_module_imports(name):
+    importlib.import_module(name)
+
+
+def test_module_docstrings_carry_no_issue_numbers():
+    for name, path in _modules().items():
+        doc = ast.get_docstring(ast.parse(path.read_text())) or ""
+        assert not re.search(r"\bissue\b|#\d", doc, re.I), name
+
+
+def test_scenes_have_one_home():
+    from granflow import scenes
+    from granflow.scenes.cell import ShearCell
+    from granflow.scenes.channel import Channel
+
+    assert scenes.Channel is Channel and scenes.ShearCell is ShearCell
+    assert {"channel", "cell", "gas"} <= set(scenes.SCENES)
+    assert scenes.get_scene("channel") is Channel
+    for old in ("granflow.channel", "granflow.cell", "granflow.timestep", "granflow.stability",
+                "granflow.plotting", "granflow.analysis.errors"):
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(old)

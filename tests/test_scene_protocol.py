@@ -1,0 +1,126 @@
+"""Every scene keeps the Scene protocol, and its run honours every argument it takes:
+``checkpoint`` is written every ``checkpoint_every`` steps, at the end and on an interrupt, and
+restores to the same state."""
+
+from __future__ import annotations
+
+import granflow as gf
+import numpy as np
+import pytest
+from granflow.scenes import Channel, PeriodicGas, Scene, ShearCell
+
+FACTORIES = {
+    "gas": lambda: PeriodicGas(L=6.0, sample_every=50, seed=2),
+    "cell": lambda: ShearCell(N=60, sample_every=50, seed=2),
+    "channel": lambda: Channel(W=6, H=8, B=3.5, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4,
+                               sample_every=50, window=4),
+}
+
+
+@pytest.fixture(params=sorted(FACTORIES))
+def scene_kind(request):
+    return request.param
+
+
+def _state(scene: Scene) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    c = scene.core
+    return c.step, c.positions(), c.velocities(), c.angular_velocities()
+
+
+def _same(a, b) -> bool:
+    return a[0] == b[0] and all(np.array_equal(x, y) for x, y in zip(a[1:], b[1:], strict=True))
+
+
+def _record_checkpoints(monkeypatch, scene) -> list[int]:
+    steps: list[int] = []
+    orig = scene.save_checkpoint
+
+    def save(path):
+        orig(path)
+        steps.append(scene.core.step)
+
+    monkeypatch.setattr(scene, "save_checkpoint", save)
+    return steps
+
+
+def test_scenes_keep_the_protocol(scene_kind):
+    s = FACTORIES[scene_kind]()
+    s.prepare()
+    s.prepare()  # idempotent
+    assert isinstance(s, Scene)
+    assert s.core.step == 0
+    assert s.scene_name == scene_kind
+
+
+def test_channel_core_needs_an_explicit_preparation():
+    ch = FACTORIES["channel"]()
+    with pytest.raises(gf.ConfigurationError, match="prepare"):
+        ch.core  # noqa: B018
+    ch.prepare()
+    x = ch.core.positions()
+    ch.prepare()  # a second call changes nothing
+    assert np.array_equal(ch.core.positions(), x)
+
+
+def test_run_writes_checkpoints_every_n_steps_and_at_the_end(scene_kind, tmp_path, monkeypatch):
+    s = FACTORIES[scene_kind]()
+    s.prepare()
+    written = _record_checkpoints(monkeypatch, s)
+    ck = tmp_path / "run.gfck"
+    s.run(250, progress=False, checkpoint=ck, checkpoint_every=100)
+    assert written == [100, 200, 250]
+    assert ck.exists()
+    r = FACTORIES[scene_kind]()
+    r.restore(ck)
+    assert _same(_state(r), _state(s))
+    # the restored scene continues as the original does
+    s.run(100, progress=False)
+    r.run(100, progress=False)
+    assert _same(_state(r), _state(s))
+
+
+def test_run_writes_a_checkpoint_at_the_end_without_checkpoint_every(scene_kind, tmp_path,
+                                                                     monkeypatch):
+    s = FACTORIES[scene_kind]()
+    s.prepare()
+    written = _record_checkpoints(monkeypatch, s)
+    s.run(120, progress=False, checkpoint=tmp_path / "end.gfck")
+    assert written == [120]
+
+
+def test_run_writes_a_checkpoint_when_interrupted(tmp_path, monkeypatch):
+    s = FACTORIES["gas"]()
+    orig = s._sample
+
+    def interrupt() -> None:
+        orig()
+        if s.core.step == 150:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(s, "_sample", interrupt)
+    ck = tmp_path / "stop.gfck"
+    with pytest.raises(KeyboardInterrupt):
+        s.run(1000, progress=False, checkpoint=ck, checkpoint_every=400)
+    r = FACTORIES["gas"]()
+    r.restore(ck)
+    assert r.core.step == 150
+    assert _same(_state(r), _state(s))
+
+
+@pytest.mark.parametrize("kind", ["gas", "cell"])
+def test_checkpoint_every_without_a_checkpoint_is_refused(kind):
+    s = FACTORIES[kind]()
+    with pytest.raises(gf.ParameterError, match="checkpoint_every"):
+        s.run(100, progress=False, checkpoint_every=50)
+    with pytest.raises(gf.ParameterError, match="checkpoint_every"):
+        s.run(100, progress=False, checkpoint="x.gfck", checkpoint_every=0)
+
+
+def test_simulation_run_writes_its_checkpoint_at_the_end(gas, make_sim, tmp_path):
+    s = make_sim(*gas)
+    ck = tmp_path / "sim.gfck"
+    s.run(30, progress=False, checkpoint=ck)
+    r = gf.Simulation.from_checkpoint(ck)
+    assert r.step == 30 and np.array_equal(r.get_positions(), s.get_positions())
+    with pytest.raises(gf.ParameterError, match="checkpoint_every"):
+        s.run(10, progress=False, checkpoint_every=5)
