@@ -361,7 +361,7 @@ def _trapezoid(t: np.ndarray, y: np.ndarray) -> float:
 
 def energy_balance(cell: ShearCell, steps: int, every: int = 1) -> EnergyBalance:
     """Run ``steps`` steps of ``cell`` (its ``series`` is not sampled meanwhile) and close the
-    energy balance of the stress-controlled dynamics (002 2.10a-d as in src/prcell.rs).
+    energy balance of the stress-controlled dynamics (002 2.10a-d as in src/domain/prcell.rs).
 
     With L = P_g/W_g (upper-triangular, isotropic diagonal), K the kinetic energy of the
     peculiar velocities (+ rotation), K_g = |P_g|^2/(2 W_g) and the drive of 2.10d

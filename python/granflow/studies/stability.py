@@ -454,7 +454,7 @@ def _register_scene_cases() -> None:
     for p in (1e-6, 1e-3):
         for r in (0.0, 1.2):
             # above yield (tau/p = 1.2 > mu1 at any I the cell sustains) the cell shears and
-            # dilates without bound: the kernel's dilation guard (src/prcell.rs) must stop it
+            # dilates without bound: the kernel's dilation guard (src/domain/prcell.rs) must stop it
             above = r > 1.0
             register(Case(
                 f"cell_p_{p:.0e}_tau_{r:g}", "cell", "long",
