@@ -30,7 +30,7 @@
 //!
 //! Tangential histories are stored per closed contact (`crate::history`), not per listed pair.
 
-use crate::contact::{Form, Friction, Law, LawParams};
+use crate::contact::{Form, Friction, Law, LawSpec};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::history::HistList;
@@ -107,7 +107,7 @@ pub struct PlaneWalls<F: Form, T: Friction> {
 }
 
 impl<F: Form, T: Friction> PlaneWalls<F, T> {
-    pub fn new(planes: Vec<Plane>, params: LawParams) -> Result<Self> {
+    pub fn new(planes: Vec<Plane>, params: LawSpec) -> Result<Self> {
         if planes.len() > MAX_WALLS {
             return Err(Error::param(
                 "walls",
@@ -302,7 +302,7 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
-pub fn min_contact_time(params: &LawParams, p: &Particles) -> Result<f64> {
+pub fn min_contact_time(params: &LawSpec, p: &Particles) -> Result<f64> {
     let m = p.min_mass();
     params.contact_time(0.5 * m)
 }
@@ -312,7 +312,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         p: Particles,
-        law: LawParams,
+        law: LawSpec,
         domain: D,
         walls: W,
         body: G,
@@ -923,7 +923,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                     dt,
                 };
                 #[cfg(target_arch = "x86_64")]
-                if crate::lanes::wide() {
+                if crate::contact::lanes::wide() {
                     // SAFETY: `wide` checked that the CPU has AVX2
                     return unsafe { affine_kick_pack_avx2::<T>(k) };
                 }
@@ -1456,7 +1456,7 @@ type AffineFinal<'a> = Option<(&'a crate::domain::StepMaps, &'a [f64])>;
 /// same bits either way).
 fn cross_kick_chunk<const STATS: bool, T: Friction>(k: CrossChunk, aff: AffineFinal) -> M3 {
     #[cfg(target_arch = "x86_64")]
-    if crate::lanes::wide() {
+    if crate::contact::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
         return unsafe { cross_kick_avx2::<STATS, T>(k, aff) };
     }
@@ -1708,7 +1708,7 @@ impl Drift {
 /// velocity relative to the frame, and the velocities' range (`Drift`).
 fn kick_drift_pack_chunk<T: Friction>(k: KickChunk) -> Drift {
     #[cfg(target_arch = "x86_64")]
-    if crate::lanes::wide() {
+    if crate::contact::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
         return unsafe { kdp_avx2::<T>(k) };
     }

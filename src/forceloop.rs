@@ -8,7 +8,7 @@
 //!
 //! Compiled twice: with AVX2 (four lanes per instruction, the pair records transposed into
 //! lanes with shuffles) and for baseline x86-64; the CPU picks at run time
-//! (`crate::lanes::wide`). Both do the same IEEE operations in the same order, and the sums
+//! (`crate::contact::lanes::wide`). Both do the same IEEE operations in the same order, and the sums
 //! have the order of the pair list, so the result is the same bits for either path and any
 //! number of threads.
 
@@ -16,7 +16,7 @@ use crate::contact::{Form, Friction, Law};
 use crate::domain::Domain;
 use crate::engine::{Body, ChunkOut, PairOut, Plane, Walls, MAX_WALLS};
 use crate::history::{Cursor, HistList};
-use crate::lanes::{Ln, PairIn, V};
+use crate::contact::lanes::{Ln, PairIn, V};
 use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
 use crate::{M3, V3};
 use std::cell::RefCell;
@@ -163,7 +163,7 @@ where
     G: Body,
 {
     #[cfg(target_arch = "x86_64")]
-    if crate::lanes::wide() {
+    if crate::contact::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2.
         return unsafe { chunk_avx2::<F, T, D, W, G, STATS, VIR>(s, c, io) };
     }
@@ -701,7 +701,7 @@ pub(crate) fn add10(acc: &mut [f64; 10], rec: &[f64; 10]) {
 mod avx {
     use super::{InnerChunk, Scratch, Shared};
     use crate::contact::{Form, Friction};
-    use crate::lanes::{Ln, PairIn};
+    use crate::contact::lanes::{Ln, PairIn};
     use std::arch::x86_64::*;
 
     /// Four 4-double records as four lanes of their components.

@@ -15,12 +15,12 @@ pub mod error;
 mod forceloop;
 pub mod history;
 pub mod insert;
-pub mod lanes;
 pub mod neighbor;
 pub mod particles;
 pub mod prcell;
 pub mod probe;
 pub mod rng;
+pub mod scene;
 pub mod sim;
 pub mod table;
 

@@ -21,7 +21,7 @@ fn head_on_gap<F: Form>(d1: f64, d2: f64, e: f64, gap: f64) -> f64 {
     let mut p = Particles::new(vec![x1, x2], &[d1, d2], 1.0).unwrap();
     p.v[0] = V3::new(0.5, 0.0, 0.0);
     p.v[1] = V3::new(-0.5, 0.0, 0.0);
-    let law = LawParams::new(1e6, e, 0.0);
+    let law = LawSpec::new(1e6, e, 0.0);
     let mut s: Free<F, Frictionless> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, None, 0.1).unwrap();
     let vrel0 = 1.0;
@@ -103,7 +103,7 @@ fn hertz_restitution_is_velocity_independent() {
 
 #[test]
 fn overdamped_rate_is_refused() {
-    let mut law = LawParams::new(1e6, 0.8, 0.5);
+    let mut law = LawSpec::new(1e6, 0.8, 0.5);
     law.damping = Damping::Rate(1e7);
     let p = Particles::new(vec![V3::new(5.0, 5.0, 5.0)], &[1.0], 1.0).unwrap();
     let r: crate::Result<Free<Hooke, Coulomb>> =
@@ -114,7 +114,7 @@ fn overdamped_rate_is_refused() {
 
 #[test]
 fn timestep_above_tc_over_10_is_refused() {
-    let law = LawParams::new(1e6, 0.8, 0.5);
+    let law = LawSpec::new(1e6, 0.8, 0.5);
     let p = Particles::new(vec![V3::new(5.0, 5.0, 5.0)], &[1.0], 1.0).unwrap();
     let r: crate::Result<Free<Hooke, Coulomb>> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, Some(1e-3), 0.1);
@@ -126,7 +126,7 @@ fn timestep_above_tc_over_10_is_refused() {
 /// as kt u + ct vt until |Ft| reaches mu |Fn|, then stays there.
 #[test]
 fn stick_slip_transition_at_coulomb_limit() {
-    let mut params = LawParams::new(1e5, 0.7, 0.4);
+    let mut params = LawSpec::new(1e5, 0.7, 0.4);
     params.kt = 2.0 / 7.0 * params.kn;
     let law = Law::<Hooke, Coulomb>::new(params).unwrap();
     let n = V3::new(0.0, 0.0, 1.0);
@@ -201,7 +201,7 @@ fn elastic_energy<D: crate::domain::Domain>(
 fn energy_drift(dt_frac: f64, steps: u64) -> f64 {
     let l = 8.0;
     let p = gas(0.3, l, 7, SizeDist::Uniform(0.9, 1.1));
-    let law = LawParams::new(1e4, 1.0, 0.0);
+    let law = LawSpec::new(1e4, 1.0, 0.0);
     let tc = min_contact_time(&law, &p).unwrap();
     let bx = OrthoBox::periodic_cube(l).unwrap();
     let mut s: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> =
@@ -247,7 +247,7 @@ fn momentum_and_angular_momentum_conserved() {
         3,
         SizeDist::Discrete(vec![(0.9, 0.3), (1.0, 0.4), (1.1, 0.3)]),
     );
-    let law = LawParams::new(1e5, 0.7, 0.5);
+    let law = LawSpec::new(1e5, 0.7, 0.5);
     let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
         p,
         law,
@@ -305,7 +305,7 @@ fn reformed_contact_starts_from_zero_history() {
     let mut p = Particles::new(vec![x1, x2], &[1.0, 1.0], 1.0).unwrap();
     p.v[0] = V3::new(0.2, 0.3, 0.0);
     p.v[1] = V3::new(-0.2, -0.3, 0.0);
-    let law = LawParams::new(1e5, 0.9, 0.5);
+    let law = LawSpec::new(1e5, 0.9, 0.5);
     let mut s: Free<Hooke, Coulomb> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, None, 0.5).unwrap();
     let mut phase = 0;
@@ -362,7 +362,7 @@ fn dense_packing_run(threads: usize) -> Vec<V3> {
             11,
             SizeDist::Discrete(vec![(0.9, 0.3), (1.0, 0.4), (1.1, 0.3)]),
         );
-        let law = LawParams::new(1e5, 0.8, 0.5);
+        let law = LawSpec::new(1e5, 0.8, 0.5);
         let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
             p,
             law,
@@ -398,7 +398,7 @@ type PeriodicEngine = Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody>;
 fn periodic(p: Particles, l: f64, e: f64, skin: f64) -> PeriodicEngine {
     Engine::new(
         p,
-        LawParams::new(1e5, e, 0.5),
+        LawSpec::new(1e5, e, 0.5),
         OrthoBox::periodic_cube(l).unwrap(),
         NoWalls,
         NoBody,
@@ -714,7 +714,7 @@ fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Ve
     let p2 = gas(0.35, l, 3, SizeDist::Uniform(0.9, 1.1));
     let mut f: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> = Engine::new(
         p2,
-        LawParams::new(1e5, 0.8, 0.0),
+        LawSpec::new(1e5, 0.8, 0.0),
         OrthoBox::periodic_cube(l).unwrap(),
         NoWalls,
         NoBody,
@@ -741,7 +741,7 @@ fn sheared_cell_run() -> (Vec<V3>, Vec<V3>, crate::M3) {
     let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
     let mut e: Engine<Hooke, Coulomb, PrCell, NoWalls, NoBody> = Engine::new(
         p,
-        LawParams::new(1e4, 0.7, 0.5),
+        LawSpec::new(1e4, 0.7, 0.5),
         cell,
         NoWalls,
         NoBody,
@@ -766,14 +766,14 @@ fn avx2_and_baseline_paths_bitwise_identical() {
             assert_eq!(x.as_slice(), y.as_slice());
         }
     };
-    let wide = crate::lanes::wide();
-    crate::lanes::set_wide(false);
+    let wide = crate::contact::lanes::wide();
+    crate::contact::lanes::set_wide(false);
     let a = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
     let ca = sheared_cell_run();
-    crate::lanes::set_wide(true);
+    crate::contact::lanes::set_wide(true);
     let b = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
     let cb = sheared_cell_run();
-    crate::lanes::set_wide(wide);
+    crate::contact::lanes::set_wide(wide);
     same(&ca.0, &cb.0);
     same(&ca.1, &cb.1);
     assert_eq!(ca.2.as_slice(), cb.2.as_slice());
@@ -818,7 +818,7 @@ fn checkpoint_restart_is_bitwise_identical() {
 fn unstable_integration_stops_with_a_clear_error() {
     let l = 8.0;
     let p = gas(0.3, l, 4, SizeDist::Uniform(0.9, 1.1));
-    let law = LawParams::new(1e4, 1.0, 0.0);
+    let law = LawSpec::new(1e4, 1.0, 0.0);
     let mut s: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> = Engine::new(
         p,
         law,
@@ -851,7 +851,7 @@ fn walled_gas<F: Form>(l: f64, seed: u64, e: f64, g: V3) -> WalledGas<F> {
     for x in p.x.iter_mut() {
         x.x = 0.6 + x.x * ((l - 1.2) / l);
     }
-    let law = LawParams::new(1e5, e, 0.5);
+    let law = LawSpec::new(1e5, e, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
     let walls = PlaneWalls::<F, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
     Engine::new(p, law, bx, walls, Gravity(g), None, 0.2).unwrap()
@@ -916,7 +916,7 @@ fn cell_flip_changes_no_contact_force() {
     // a dense-ish frictionless gas in a cell whose tilt is just below half a box length
     let l = 8.0;
     let mut p = gas(0.12, l, 31, SizeDist::Uniform(0.9, 1.1));
-    let law = LawParams::new(1e4, 0.8, 0.0);
+    let law = LawSpec::new(1e4, 0.8, 0.0);
     let mut cell = PrCell::new(l, 50.max(p.len()), 1.0, 1e-3, 0.0).unwrap();
     let mut h = cell.h;
     h[(0, 1)] = 0.499 * l;
@@ -1005,7 +1005,7 @@ fn sheared_cell_pruning_changes_no_bits_and_misses_no_contact() {
     // list's bound must count
     p.v.iter_mut().for_each(|v| *v = V3::zeros());
     p.omega.iter_mut().for_each(|w| *w = V3::zeros());
-    let law = LawParams::new(1e4, 0.7, 0.5);
+    let law = LawSpec::new(1e4, 0.7, 0.5);
     // pressure and shear stress well above the gas's: the cell compacts and shears
     let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
     let run = |prune: f64| {
