@@ -5,7 +5,9 @@
 //!
 //! A scene is composed at compile time: the engine is generic over its contact law (Hooke/Hertz,
 //! frictional or not), its domain (periodic box, channel walls, triclinic cell) and its body force,
-//! so a scene carries and executes only the parts it uses.
+//! so a scene carries and executes only the parts it uses. [`scene::build`] is the one place
+//! where a scene described as data ([`scene::SceneSpec`], with its contact law resolved by
+//! [`contact::LawSpec`]) becomes such an engine.
 
 pub mod checkpoint;
 pub mod contact;

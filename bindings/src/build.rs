@@ -225,9 +225,13 @@ fn diameters_for_volume(
 /// Dimensionless damping of the Hertz–Tsuji law for a restitution e_n (for documentation/tests).
 #[pyfunction]
 fn hertz_zeta(e_n: f64) -> PyResult<f64> {
-    if !(e_n > 0.0 && e_n <= 1.0) {
-        return Err(param_err("e_n", e_n, "0 < e_n <= 1"));
+    // e_n checked as the law checks it
+    LawInput {
+        e_n: Some(e_n),
+        ..LawInput::default()
     }
+    .resolve("")
+    .py_err()?;
     Ok(<Hertz as Form>::zeta(e_n))
 }
 
