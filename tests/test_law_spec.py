@@ -85,3 +85,13 @@ def test_invalid_laws_are_refused_by_the_kernel(law, needle):
         bad = gf.ContactLaw(**law)  # kept as given ...
         with pytest.raises(gf.ParameterError, match=needle):
             bad.as_dict()  # ... and refused when used
+
+
+def test_channel_wall_law_takes_the_kernel_kt():
+    # the channel's wall law leaves kt to the law: 2/7 of the wall's kn, as the kernel resolves it
+    from granflow.channel import Channel
+
+    ch = Channel(kn=2e5, wall_kn=3e5)
+    assert ch.wall_law.as_dict() == _core.resolve_law({"kn": 3e5, "e_n": ch.e_n, "mu": ch.mu})
+    assert ch.wall_law.kt == 2 / 7 * 3e5 and ch.law.kt == 2 / 7 * 2e5
+    assert Channel(kn=2e5).wall_law == ch.law
