@@ -7,33 +7,34 @@
 //! Knobs (environment): PRUNE=k prune interval, FUSE=n fused sweep from n particles,
 //! NO_TEAM=1 steps through rayon only, NO_PRUNE_TEAM=1 prunes outside the team,
 //! PAD=b allocate b bytes first (shifts the heap layout), PIN=1 pins worker i to CPU i.
-use granflow::components::{Body, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
-use granflow::contact::{Coulomb, Form, Friction, Frictionless, Hooke, LawParams};
-use granflow::domain::OrthoBox;
+use granflow::components::{Body, Plane, Walls};
+use granflow::contact::{Form, Friction, LawInput, LawSpec};
+use granflow::domain::Domain;
 use granflow::engine::Engine;
 use granflow::particles::Particles;
+use granflow::scene::{build_with, DomainSpec, EngineSink, FormKind, SceneSpec};
 use granflow::V3;
 use std::time::Instant;
 
-fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
-    p: Particles,
-    law: LawParams,
-    bx: OrthoBox,
-    walls: W,
-    body: G,
-    dt: f64,
+/// Receives the engine `granflow::scene` composes, sets the knobs and runs it.
+struct Bench {
+    steps: u64,
+}
+
+impl EngineSink for Bench {
+    type Output = ();
+    fn take<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
+        self,
+        e: Engine<F, T, D, W, G>,
+    ) {
+        go(e, self.steps)
+    }
+}
+
+fn go<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
+    mut e: Engine<F, T, D, W, G>,
     steps: u64,
 ) {
-    // PAD bytes allocated first: shifts the heap layout (for layout-dependent effects)
-    let _pad: Vec<u8> = vec![
-        1;
-        std::env::var("PAD")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(0)
-    ];
-    let mut e: Engine<Hooke, T, OrthoBox, W, G> =
-        Engine::new(p, law, bx, walls, body, Some(dt), skin()).unwrap();
     if let Some(k) = std::env::var("PRUNE").ok().and_then(|s| s.parse().ok()) {
         e.tuning.prune_steps = k;
     }
@@ -78,7 +79,7 @@ fn go<T: Friction, W: Walls<Hooke, T>, G: Body>(
     }
     println!(
         "N={n} steps={steps} {}: {:.3e} particle-steps/s wall, {:.3e} per CPU-second",
-        <Hooke as Form>::NAME,
+        F::NAME,
         n as f64 * steps as f64 / el,
         n as f64 * steps as f64 / cpu
     );
@@ -130,7 +131,37 @@ fn main() {
         p.v[i] = V3::new(r[3], r[4], r[5]);
         p.omega[i] = V3::new(r[6], r[7], r[8]);
     }
-    let law = LawParams::new(1e6, 0.82, mu);
+    let law = LawSpec::resolve(
+        &LawInput {
+            kn: Some(1e6),
+            e_n: Some(0.82),
+            mu: Some(mu),
+            ..LawInput::default()
+        },
+        "",
+    )
+    .unwrap();
+    let mut spec = if kind == 1 {
+        let bx = DomainSpec::Box {
+            lo: V3::zeros(),
+            length: l,
+            periodic: [false, true, true],
+        };
+        let mut spec = SceneSpec::new(p, law, bx);
+        spec.walls = Plane::pair_across(0, 0.0, l.x);
+        spec.gravity = Some(V3::new(0.0, -1.0, 0.0));
+        spec
+    } else {
+        let bx = DomainSpec::Box {
+            lo: V3::zeros(),
+            length: l,
+            periodic: [true; 3],
+        };
+        SceneSpec::new(p, law, bx)
+    };
+    spec.form = FormKind::Hooke;
+    spec.dt = Some(dt);
+    spec.skin = skin();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .start_handler(|i| {
@@ -143,24 +174,14 @@ fn main() {
         .unwrap();
     println!("kind={kind} threads={threads} mu={mu}");
     pool.install(|| {
-        if kind == 1 {
-            let bx = OrthoBox::new(V3::zeros(), l, [false, true, true]).unwrap();
-            let planes = Plane::pair_across(0, 0.0, l.x);
-            let g = Gravity(V3::new(0.0, -1.0, 0.0));
-            if mu > 0.0 {
-                let w = PlaneWalls::<Hooke, Coulomb>::new(planes, law).unwrap();
-                go::<Coulomb, _, _>(p, law, bx, w, g, dt, steps);
-            } else {
-                let w = PlaneWalls::<Hooke, Frictionless>::new(planes, law).unwrap();
-                go::<Frictionless, _, _>(p, law, bx, w, g, dt, steps);
-            }
-        } else {
-            let bx = OrthoBox::new(V3::zeros(), l, [true; 3]).unwrap();
-            if mu > 0.0 {
-                go::<Coulomb, _, _>(p, law, bx, NoWalls, NoBody, dt, steps);
-            } else {
-                go::<Frictionless, _, _>(p, law, bx, NoWalls, NoBody, dt, steps);
-            }
-        }
+        // PAD bytes allocated first: shifts the heap layout (for layout-dependent effects)
+        let _pad: Vec<u8> = vec![
+            1;
+            std::env::var("PAD")
+                .ok()
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(0)
+        ];
+        build_with(spec, Bench { steps }).unwrap();
     });
 }

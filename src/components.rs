@@ -2,7 +2,7 @@
 //! body force. Each is a type parameter of [`crate::engine::Engine`]; `NoWalls` and `NoBody`
 //! have `ON = false`, so a scene without them carries none of their code in its step.
 
-use crate::contact::{Form, Friction, Law, LawParams};
+use crate::contact::{Form, Friction, Law, LawSpec};
 use crate::error::{Error, Result};
 use crate::V3;
 
@@ -62,7 +62,7 @@ pub struct PlaneWalls<F: Form, T: Friction> {
 }
 
 impl<F: Form, T: Friction> PlaneWalls<F, T> {
-    pub fn new(planes: Vec<Plane>, params: LawParams) -> Result<Self> {
+    pub fn new(planes: Vec<Plane>, params: LawSpec) -> Result<Self> {
         if planes.len() > MAX_WALLS {
             return Err(Error::param(
                 "walls",
@@ -70,10 +70,9 @@ impl<F: Form, T: Friction> PlaneWalls<F, T> {
                 format!("at most {MAX_WALLS}"),
             ));
         }
-        params.validate("wall_")?;
         Ok(PlaneWalls {
             planes,
-            law: Law::new(params)?,
+            law: Law::new(params),
         })
     }
 }

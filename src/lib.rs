@@ -5,7 +5,9 @@
 //!
 //! A scene is composed at compile time: the engine is generic over its contact law (Hooke/Hertz,
 //! frictional or not), its domain (periodic box, channel walls, triclinic cell) and its body force,
-//! so a scene carries and executes only the parts it uses.
+//! so a scene carries and executes only the parts it uses. [`scene::build`] is the one place
+//! where a scene described as data ([`scene::SceneSpec`], with its contact law resolved by
+//! [`contact::LawSpec`]) becomes such an engine.
 
 pub mod checkpoint;
 pub mod components;
@@ -15,11 +17,11 @@ pub mod engine;
 pub mod error;
 pub mod history;
 pub mod insert;
-pub mod lanes;
 pub mod neighbor;
 pub mod particles;
 pub mod probe;
 pub mod rng;
+pub mod scene;
 pub mod sim;
 pub mod table;
 

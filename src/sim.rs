@@ -3,7 +3,7 @@
 //! dispatch happens once per `run` call, never per particle or pair.
 
 use crate::components::{Body, Walls};
-use crate::contact::{Form, Friction};
+use crate::contact::{Form, Friction, LawSpec};
 use crate::domain::Domain;
 use crate::engine::{Engine, StepDiag};
 use crate::error::Result;
@@ -21,6 +21,10 @@ pub trait Simulation: Send + Sync {
     fn time(&self) -> f64;
     fn dt(&self) -> f64;
     fn contact_time(&self) -> f64;
+    /// The particle–particle law in use (resolved: every default filled).
+    fn law(&self) -> LawSpec;
+    /// The particle–wall law in use (None without walls).
+    fn wall_law(&self) -> Option<LawSpec>;
     fn diag(&self) -> StepDiag;
     /// Neighbour-list builds and prunes since the start (counters, for benchmarks and tuning).
     fn list_counts(&self) -> (u64, u64);
@@ -251,6 +255,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     }
     fn contact_time(&self) -> f64 {
         Engine::contact_time(self)
+    }
+    fn law(&self) -> LawSpec {
+        self.law.params
+    }
+    fn wall_law(&self) -> Option<LawSpec> {
+        self.walls.law().map(|l| l.params)
     }
     fn diag(&self) -> StepDiag {
         self.diag.clone()

@@ -5,7 +5,7 @@ mod common;
 
 use common::gas;
 use granflow::components::{NoBody, NoWalls};
-use granflow::contact::{Coulomb, Frictionless, Hooke, LawParams};
+use granflow::contact::{Coulomb, Frictionless, Hooke, LawSpec};
 use granflow::domain::Domain;
 use granflow::domain::PrCell;
 use granflow::engine::Engine;
@@ -18,7 +18,7 @@ fn cell_flip_changes_no_contact_force() {
     // a dense-ish frictionless gas in a cell whose tilt is just below half a box length
     let l = 8.0;
     let mut p = gas(0.12, l, 31, SizeDist::Uniform(0.9, 1.1));
-    let law = LawParams::new(1e4, 0.8, 0.0);
+    let law = LawSpec::new(1e4, 0.8, 0.0);
     let mut cell = PrCell::new(l, 50.max(p.len()), 1.0, 1e-3, 0.0).unwrap();
     let mut h = cell.h;
     h[(0, 1)] = 0.499 * l;
@@ -103,7 +103,7 @@ fn sheared_cell_pruning_changes_no_bits_and_misses_no_contact() {
     // list's bound must count
     p.v.iter_mut().for_each(|v| *v = V3::zeros());
     p.omega.iter_mut().for_each(|w| *w = V3::zeros());
-    let law = LawParams::new(1e4, 0.7, 0.5);
+    let law = LawSpec::new(1e4, 0.7, 0.5);
     // pressure and shear stress well above the gas's: the cell compacts and shears
     let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
     let run = |prune: f64| {

@@ -7,7 +7,7 @@ mod common;
 use common::{free_box, Free};
 use granflow::components::{NoBody, NoWalls};
 use granflow::contact::{
-    hertz_restitution, Coulomb, Damping, Form, Frictionless, Hertz, Hooke, Law, LawParams,
+    hertz_restitution, Coulomb, Damping, Form, Frictionless, Hertz, Hooke, Law, LawSpec,
 };
 use granflow::engine::Engine;
 use granflow::particles::Particles;
@@ -20,7 +20,7 @@ fn head_on_gap<F: Form>(d1: f64, d2: f64, e: f64, gap: f64) -> f64 {
     let mut p = Particles::new(vec![x1, x2], &[d1, d2], 1.0).unwrap();
     p.v[0] = V3::new(0.5, 0.0, 0.0);
     p.v[1] = V3::new(-0.5, 0.0, 0.0);
-    let law = LawParams::new(1e6, e, 0.0);
+    let law = LawSpec::new(1e6, e, 0.0);
     let mut s: Free<F, Frictionless> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, None, 0.1).unwrap();
     let vrel0 = 1.0;
@@ -102,7 +102,7 @@ fn hertz_restitution_is_velocity_independent() {
 
 #[test]
 fn overdamped_rate_is_refused() {
-    let mut law = LawParams::new(1e6, 0.8, 0.5);
+    let mut law = LawSpec::new(1e6, 0.8, 0.5);
     law.damping = Damping::Rate(1e7);
     let p = Particles::new(vec![V3::new(5.0, 5.0, 5.0)], &[1.0], 1.0).unwrap();
     let r: granflow::Result<Free<Hooke, Coulomb>> =
@@ -113,7 +113,7 @@ fn overdamped_rate_is_refused() {
 
 #[test]
 fn timestep_above_tc_over_10_is_refused() {
-    let law = LawParams::new(1e6, 0.8, 0.5);
+    let law = LawSpec::new(1e6, 0.8, 0.5);
     let p = Particles::new(vec![V3::new(5.0, 5.0, 5.0)], &[1.0], 1.0).unwrap();
     let r: granflow::Result<Free<Hooke, Coulomb>> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, Some(1e-3), 0.1);
@@ -125,9 +125,9 @@ fn timestep_above_tc_over_10_is_refused() {
 /// as kt u + ct vt until |Ft| reaches mu |Fn|, then stays there.
 #[test]
 fn stick_slip_transition_at_coulomb_limit() {
-    let mut params = LawParams::new(1e5, 0.7, 0.4);
+    let mut params = LawSpec::new(1e5, 0.7, 0.4);
     params.kt = 2.0 / 7.0 * params.kn;
-    let law = Law::<Hooke, Coulomb>::new(params).unwrap();
+    let law = Law::<Hooke, Coulomb>::new(params);
     let n = V3::new(0.0, 0.0, 1.0);
     let delta = 1e-3;
     let vt = 0.01;
@@ -170,7 +170,7 @@ fn reformed_contact_starts_from_zero_history() {
     let mut p = Particles::new(vec![x1, x2], &[1.0, 1.0], 1.0).unwrap();
     p.v[0] = V3::new(0.2, 0.3, 0.0);
     p.v[1] = V3::new(-0.2, -0.3, 0.0);
-    let law = LawParams::new(1e5, 0.9, 0.5);
+    let law = LawSpec::new(1e5, 0.9, 0.5);
     let mut s: Free<Hooke, Coulomb> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, None, 0.5).unwrap();
     let mut phase = 0;

@@ -5,7 +5,7 @@ mod common;
 
 use common::{free_box, gas, Free};
 use granflow::components::{NoBody, NoWalls};
-use granflow::contact::{Coulomb, Frictionless, Hooke, LawParams};
+use granflow::contact::{Coulomb, Frictionless, Hooke, LawSpec};
 use granflow::domain::{Domain, OrthoBox};
 use granflow::engine::{min_contact_time, Engine};
 use granflow::insert::SizeDist;
@@ -28,7 +28,7 @@ fn elastic_energy<D: Domain>(e: &Engine<Hooke, Frictionless, D, NoWalls, NoBody>
 fn energy_drift(dt_frac: f64, steps: u64) -> f64 {
     let l = 8.0;
     let p = gas(0.3, l, 7, SizeDist::Uniform(0.9, 1.1));
-    let law = LawParams::new(1e4, 1.0, 0.0);
+    let law = LawSpec::new(1e4, 1.0, 0.0);
     let tc = min_contact_time(&law, &p).unwrap();
     let bx = OrthoBox::periodic_cube(l).unwrap();
     let mut s: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> =
@@ -74,7 +74,7 @@ fn momentum_and_angular_momentum_conserved() {
         3,
         SizeDist::Discrete(vec![(0.9, 0.3), (1.0, 0.4), (1.1, 0.3)]),
     );
-    let law = LawParams::new(1e5, 0.7, 0.5);
+    let law = LawSpec::new(1e5, 0.7, 0.5);
     let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
         p,
         law,

@@ -9,7 +9,7 @@ mod common;
 use common::{gas, periodic_gas, walled_channel, walled_gas, WalledGas};
 use granflow::checkpoint::{Reader, Writer};
 use granflow::components::{NoBody, NoWalls};
-use granflow::contact::{Coulomb, Form, Frictionless, Hertz, Hooke, LawParams};
+use granflow::contact::{Coulomb, Form, Frictionless, Hertz, Hooke, LawSpec};
 use granflow::domain::PrCell;
 use granflow::domain::{Domain, OrthoBox};
 use granflow::engine::{Engine, DEFAULT_PRUNE_STEPS};
@@ -29,7 +29,7 @@ fn dense_packing_run(threads: usize) -> Vec<V3> {
             11,
             SizeDist::Discrete(vec![(0.9, 0.3), (1.0, 0.4), (1.1, 0.3)]),
         );
-        let law = LawParams::new(1e5, 0.8, 0.5);
+        let law = LawSpec::new(1e5, 0.8, 0.5);
         let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
             p,
             law,
@@ -196,7 +196,7 @@ fn walled_hertz_and_frictionless_runs() -> (Vec<V3>, Vec<V3>, Vec<[f64; 10]>, Ve
     let p2 = gas(0.35, l, 3, SizeDist::Uniform(0.9, 1.1));
     let mut f: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> = Engine::new(
         p2,
-        LawParams::new(1e5, 0.8, 0.0),
+        LawSpec::new(1e5, 0.8, 0.0),
         OrthoBox::periodic_cube(l).unwrap(),
         NoWalls,
         NoBody,
@@ -221,7 +221,7 @@ fn sheared_cell_run() -> (Vec<V3>, Vec<V3>, M3) {
     let cell = PrCell::new(l, p.len(), 0.5, 20.0, 8.0).unwrap();
     let mut e: Engine<Hooke, Coulomb, PrCell, NoWalls, NoBody> = Engine::new(
         p,
-        LawParams::new(1e4, 0.7, 0.5),
+        LawSpec::new(1e4, 0.7, 0.5),
         cell,
         NoWalls,
         NoBody,
@@ -246,14 +246,14 @@ fn avx2_and_baseline_paths_bitwise_identical() {
             assert_eq!(x.as_slice(), y.as_slice());
         }
     };
-    let wide = granflow::lanes::wide();
-    granflow::lanes::set_wide(false);
+    let wide = granflow::contact::lanes::wide();
+    granflow::contact::lanes::set_wide(false);
     let a = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
     let ca = sheared_cell_run();
-    granflow::lanes::set_wide(true);
+    granflow::contact::lanes::set_wide(true);
     let b = (dense_packing_run(2), walled_hertz_and_frictionless_runs());
     let cb = sheared_cell_run();
-    granflow::lanes::set_wide(wide);
+    granflow::contact::lanes::set_wide(wide);
     same(&ca.0, &cb.0);
     same(&ca.1, &cb.1);
     assert_eq!(ca.2.as_slice(), cb.2.as_slice());

@@ -4,7 +4,7 @@ mod common;
 
 use common::gas;
 use granflow::components::{NoBody, NoWalls};
-use granflow::contact::{Frictionless, Hooke, LawParams};
+use granflow::contact::{Frictionless, Hooke, LawSpec};
 use granflow::domain::OrthoBox;
 use granflow::engine::Engine;
 use granflow::insert::SizeDist;
@@ -13,7 +13,7 @@ use granflow::insert::SizeDist;
 fn unstable_integration_stops_with_a_clear_error() {
     let l = 8.0;
     let p = gas(0.3, l, 4, SizeDist::Uniform(0.9, 1.1));
-    let law = LawParams::new(1e4, 1.0, 0.0);
+    let law = LawSpec::new(1e4, 1.0, 0.0);
     let mut s: Engine<Hooke, Frictionless, OrthoBox, NoWalls, NoBody> = Engine::new(
         p,
         law,

@@ -1,14 +1,14 @@
-//! Constructors: parse Python parameters, then pick the compile-time composition
-//! (form x friction x walls x gravity) once. Validation errors name the parameter.
+//! Constructors: typed extraction of Python arguments into a `granflow::scene::SceneSpec`,
+//! then `granflow::scene::build` (the one place engines are composed). Defaults and
+//! validation of contact laws live in `granflow::contact::LawSpec`; errors map to Python in
+//! `errors`.
 
 use crate::errors::{param_err, IntoPy};
 use crate::sim::Sim;
-use granflow::components::{Body, Gravity, NoBody, NoWalls, Plane, PlaneWalls, Walls};
-use granflow::contact::{Coulomb, Damping, Form, Friction, Frictionless, Hertz, Hooke, LawParams};
-use granflow::domain::OrthoBox;
-use granflow::engine::Engine;
+use granflow::components::Plane;
+use granflow::contact::{Form, Hertz, LawInput, LawSpec};
 use granflow::particles::Particles;
-use granflow::sim::Simulation;
+use granflow::scene::{build, DomainSpec, FormKind, SceneSpec};
 use granflow::V3;
 use numpy::{PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -21,57 +21,66 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(hertz_zeta, m)?)?;
     m.add_function(wrap_pyfunction!(contact_time, m)?)?;
     m.add_function(wrap_pyfunction!(cell_sim, m)?)?;
+    m.add_function(wrap_pyfunction!(resolve_law, m)?)?;
     Ok(())
 }
 
-fn get_f64(d: &Bound<'_, PyDict>, key: &str) -> PyResult<Option<f64>> {
+fn get_f64(d: &Bound<'_, PyDict>, key: &str, prefix: &str) -> PyResult<Option<f64>> {
     match d.get_item(key)? {
         None => Ok(None),
         Some(v) if v.is_none() => Ok(None),
         Some(v) => v
             .extract::<f64>()
             .map(Some)
-            .map_err(|_| param_err(key, v.to_string(), "a number")),
+            .map_err(|_| param_err(&format!("{prefix}{key}"), v.to_string(), "a number")),
     }
 }
 
-/// Parse a contact-law dict: kn, kt (default 2/7 kn), e_n or xi_n, xi_t_ratio (default 1/2), mu.
-pub fn parse_law(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawParams> {
-    let allowed = ["kn", "kt", "e_n", "xi_n", "xi_t_ratio", "mu"];
+/// The fields of a contact-law dict (kn, kt, e_n, xi_n, xi_t_ratio, mu; missing or None: the
+/// kernel's default), unknown keys refused.
+fn law_input(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawInput> {
+    const ALLOWED: [&str; 6] = ["kn", "kt", "e_n", "xi_n", "xi_t_ratio", "mu"];
     for k in d.keys() {
         let k: String = k.extract()?;
-        if !allowed.contains(&k.as_str()) {
+        if !ALLOWED.contains(&k.as_str()) {
             return Err(param_err(
                 &format!("{prefix}{k}"),
                 "(unknown key)",
-                &format!("one of {allowed:?}"),
+                &format!("one of {ALLOWED:?}"),
             ));
         }
     }
-    let kn =
-        get_f64(d, "kn")?.ok_or_else(|| param_err(&format!("{prefix}kn"), "missing", "> 0"))?;
-    let mu = get_f64(d, "mu")?.unwrap_or(0.0);
-    let damping = match (get_f64(d, "e_n")?, get_f64(d, "xi_n")?) {
-        (Some(e), None) => Damping::Restitution(e),
-        (None, Some(x)) => Damping::Rate(x),
-        (None, None) => Damping::Restitution(1.0),
-        (Some(_), Some(_)) => {
-            return Err(param_err(
-                &format!("{prefix}e_n/xi_n"),
-                "both given",
-                "exactly one of e_n (restitution) or xi_n (damping rate)",
-            ))
-        }
-    };
-    let p = LawParams {
-        kn,
-        kt: get_f64(d, "kt")?.unwrap_or(2.0 / 7.0 * kn),
-        damping,
-        xi_t_ratio: get_f64(d, "xi_t_ratio")?.unwrap_or(0.5),
-        mu,
-    };
-    p.validate(prefix).py_err()?;
-    Ok(p)
+    let f = |k: &str| get_f64(d, k, prefix);
+    Ok(LawInput {
+        kn: f("kn")?,
+        kt: f("kt")?,
+        e_n: f("e_n")?,
+        xi_n: f("xi_n")?,
+        xi_t_ratio: f("xi_t_ratio")?,
+        mu: f("mu")?,
+    })
+}
+
+/// Parse a contact-law dict into a resolved, validated law (`LawSpec::resolve`).
+pub fn parse_law(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawSpec> {
+    law_input(d, prefix)?.resolve(prefix).py_err()
+}
+
+/// A resolved law as a dict: kn, kt, e_n or xi_n, xi_t_ratio, mu.
+pub fn law_dict<'py>(py: Python<'py>, law: &LawSpec) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for (k, v) in law.entries() {
+        d.set_item(k, v)?;
+    }
+    Ok(d)
+}
+
+/// The kernel's resolution of a contact-law dict: every field filled with its default
+/// (kn 1e6, kt 2/7 kn, e_n 0.82 unless xi_n is given, xi_t_ratio 1/2, mu 0.5) and validated;
+/// an invalid law raises ParameterError.
+#[pyfunction]
+fn resolve_law<'py>(py: Python<'py>, law: &Bound<'py, PyDict>) -> PyResult<Bound<'py, PyDict>> {
+    law_dict(py, &parse_law(law, "")?)
 }
 
 pub fn vec3_rows(a: &PyReadonlyArray2<'_, f64>, name: &str, n: Option<usize>) -> PyResult<Vec<V3>> {
@@ -89,44 +98,14 @@ pub fn vec3_rows(a: &PyReadonlyArray2<'_, f64>, name: &str, n: Option<usize>) ->
         .collect())
 }
 
-#[allow(clippy::too_many_arguments)]
-fn finish<F: Form, T: Friction, W: Walls<F, T>, G: Body>(
-    p: Particles,
-    law: LawParams,
-    dom: OrthoBox,
-    walls: W,
-    g: G,
-    dt: Option<f64>,
-    skin: f64,
-) -> PyResult<Box<dyn Simulation>> {
-    let e: Engine<F, T, OrthoBox, W, G> = Engine::new(p, law, dom, walls, g, dt, skin).py_err()?;
-    Ok(Box::new(e))
-}
-
-#[allow(clippy::too_many_arguments)]
-fn with_walls<F: Form, T: Friction>(
-    p: Particles,
-    law: LawParams,
-    dom: OrthoBox,
-    planes: Vec<Plane>,
-    wall_law: LawParams,
-    gravity: Option<V3>,
-    dt: Option<f64>,
-    skin: f64,
-) -> PyResult<Box<dyn Simulation>> {
-    match (planes.is_empty(), gravity) {
-        (true, None) => finish::<F, T, NoWalls, NoBody>(p, law, dom, NoWalls, NoBody, dt, skin),
-        (true, Some(g)) => {
-            finish::<F, T, NoWalls, Gravity>(p, law, dom, NoWalls, Gravity(g), dt, skin)
-        }
-        (false, g) => {
-            let w = PlaneWalls::<F, T>::new(planes, wall_law).py_err()?;
-            match g {
-                None => finish::<F, T, _, NoBody>(p, law, dom, w, NoBody, dt, skin),
-                Some(g) => finish::<F, T, _, Gravity>(p, law, dom, w, Gravity(g), dt, skin),
-            }
-        }
-    }
+fn particles(
+    x: &PyReadonlyArray2<'_, f64>,
+    diameter: &PyReadonlyArray1<'_, f64>,
+    density: f64,
+) -> PyResult<Particles> {
+    let xs = vec3_rows(x, "positions", None)?;
+    let d = diameter.as_array().to_vec();
+    Particles::new(xs, &d, density).py_err()
 }
 
 /// Build a simulation in an orthogonal box (periodic flag per axis), with optional planar walls
@@ -134,7 +113,10 @@ fn with_walls<F: Form, T: Friction>(
 /// when mu > 0 for the particles or the walls.
 #[pyfunction]
 #[pyo3(signature = (x, diameter, density, lo, length, periodic, form, law, walls=None, wall_law=None, gravity=None, dt=None, skin=0.3, v=None, omega=None))]
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "the Python signature of box_sim, keyword arguments with defaults"
+)]
 fn box_sim(
     x: PyReadonlyArray2<'_, f64>,
     diameter: PyReadonlyArray1<'_, f64>,
@@ -152,58 +134,31 @@ fn box_sim(
     v: Option<PyReadonlyArray2<'_, f64>>,
     omega: Option<PyReadonlyArray2<'_, f64>>,
 ) -> PyResult<Sim> {
-    let xs = vec3_rows(&x, "positions", None)?;
-    let n = xs.len();
-    let d = diameter.as_array().to_vec();
-    let mut p = Particles::new(xs, &d, density).py_err()?;
+    let mut p = particles(&x, &diameter, density)?;
+    let n = p.len();
     if let Some(v) = v {
         p.v = vec3_rows(&v, "velocities", Some(n))?;
     }
     if let Some(w) = omega {
         p.omega = vec3_rows(&w, "angular_velocities", Some(n))?;
     }
-    let law = parse_law(law, "")?;
-    let wall_law = match wall_law {
-        Some(w) => parse_law(w, "wall_")?,
-        None => law,
+    let domain = DomainSpec::Box {
+        lo: V3::from(lo),
+        length: V3::from(length),
+        periodic,
     };
-    let dom = OrthoBox::new(V3::from(lo), V3::from(length), periodic).py_err()?;
-    let mut planes = Vec::new();
-    for (axis, pos, sign) in walls.unwrap_or_default() {
-        if axis > 2 || !(sign == 1.0 || sign == -1.0) || !pos.is_finite() {
-            return Err(param_err(
-                "walls",
-                format!("({axis}, {pos}, {sign})"),
-                "(axis 0..2, position, sign +1 or -1)",
-            ));
-        }
-        if periodic[axis] {
-            return Err(param_err(
-                "walls",
-                format!("a wall on periodic axis {axis}"),
-                "walls only on non-periodic axes",
-            ));
-        }
-        planes.push(Plane { axis, pos, sign });
-    }
-    let g = gravity.map(V3::from);
-    let frictional = law.mu > 0.0 || (!planes.is_empty() && wall_law.mu > 0.0);
-    let inner = match (form, frictional) {
-        ("hooke", true) => {
-            with_walls::<Hooke, Coulomb>(p, law, dom, planes, wall_law, g, dt, skin)?
-        }
-        ("hooke", false) => {
-            with_walls::<Hooke, Frictionless>(p, law, dom, planes, wall_law, g, dt, skin)?
-        }
-        ("hertz", true) => {
-            with_walls::<Hertz, Coulomb>(p, law, dom, planes, wall_law, g, dt, skin)?
-        }
-        ("hertz", false) => {
-            with_walls::<Hertz, Frictionless>(p, law, dom, planes, wall_law, g, dt, skin)?
-        }
-        _ => return Err(param_err("form", form, "'hooke' or 'hertz'")),
-    };
-    Sim::new(inner, "box")
+    let mut spec = SceneSpec::new(p, parse_law(law, "")?, domain);
+    spec.wall_law = wall_law.map(|w| parse_law(w, "wall_")).transpose()?;
+    spec.walls = walls
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(axis, pos, sign)| Plane { axis, pos, sign })
+        .collect();
+    spec.form = FormKind::parse(form).py_err()?;
+    spec.gravity = gravity.map(V3::from);
+    spec.dt = dt;
+    spec.skin = skin;
+    Sim::new(build(spec).py_err()?, "box")
 }
 
 /// Random non-overlapping insertion; returns an (N, 3) array.
@@ -273,9 +228,13 @@ fn diameters_for_volume(
 /// Dimensionless damping of the Hertz–Tsuji law for a restitution e_n (for documentation/tests).
 #[pyfunction]
 fn hertz_zeta(e_n: f64) -> PyResult<f64> {
-    if !(e_n > 0.0 && e_n <= 1.0) {
-        return Err(param_err("e_n", e_n, "0 < e_n <= 1"));
+    // e_n checked as the law checks it
+    LawInput {
+        e_n: Some(e_n),
+        ..LawInput::default()
     }
+    .resolve("")
+    .py_err()?;
     Ok(<Hertz as Form>::zeta(e_n))
 }
 
@@ -284,28 +243,18 @@ fn hertz_zeta(e_n: f64) -> PyResult<f64> {
 #[pyfunction]
 fn contact_time(law: &Bound<'_, PyDict>, m_eff: f64) -> PyResult<f64> {
     let p = parse_law(law, "")?;
-    p.validate("").py_err()?;
     granflow::error::check_positive("m_eff", m_eff).py_err()?;
     p.contact_time(m_eff).py_err()
-}
-
-fn cell_engine<F: Form, T: Friction>(
-    p: Particles,
-    law: LawParams,
-    cell: granflow::domain::PrCell,
-    dt: Option<f64>,
-    skin: f64,
-) -> PyResult<Box<dyn Simulation>> {
-    let e: Engine<F, T, granflow::domain::PrCell, NoWalls, NoBody> =
-        Engine::new(p, law, cell, NoWalls, NoBody, dt, skin).py_err()?;
-    Ok(Box::new(e))
 }
 
 /// The stress-controlled triclinic cell of 002: particles in a cubic periodic cell of side
 /// `length`, imposed p_ext and tau_ext (xy), cell mass `wg`. No walls, no gravity.
 #[pyfunction]
 #[pyo3(signature = (x, diameter, density, length, form, law, p_ext, tau_ext, wg, dt=None, skin=0.3))]
-#[allow(clippy::too_many_arguments)]
+#[allow(
+    clippy::too_many_arguments,
+    reason = "the Python signature of cell_sim, keyword arguments with defaults"
+)]
 fn cell_sim(
     x: PyReadonlyArray2<'_, f64>,
     diameter: PyReadonlyArray1<'_, f64>,
@@ -319,18 +268,16 @@ fn cell_sim(
     dt: Option<f64>,
     skin: f64,
 ) -> PyResult<Sim> {
-    let xs = vec3_rows(&x, "positions", None)?;
-    let d = diameter.as_array().to_vec();
-    let p = Particles::new(xs, &d, density).py_err()?;
-    let law = parse_law(law, "")?;
-    let mut cell = granflow::domain::PrCell::new(length, p.len(), wg, p_ext, tau_ext).py_err()?;
-    cell.d_max = 2.0 * p.max_radius();
-    let inner = match (form, law.mu > 0.0) {
-        ("hooke", true) => cell_engine::<Hooke, Coulomb>(p, law, cell, dt, skin)?,
-        ("hooke", false) => cell_engine::<Hooke, Frictionless>(p, law, cell, dt, skin)?,
-        ("hertz", true) => cell_engine::<Hertz, Coulomb>(p, law, cell, dt, skin)?,
-        ("hertz", false) => cell_engine::<Hertz, Frictionless>(p, law, cell, dt, skin)?,
-        _ => return Err(param_err("form", form, "'hooke' or 'hertz'")),
+    let p = particles(&x, &diameter, density)?;
+    let domain = DomainSpec::Cell {
+        length,
+        p_ext,
+        tau_ext,
+        wg,
     };
-    Sim::new(inner, "cell")
+    let mut spec = SceneSpec::new(p, parse_law(law, "")?, domain);
+    spec.form = FormKind::parse(form).py_err()?;
+    spec.dt = dt;
+    spec.skin = skin;
+    Sim::new(build(spec).py_err()?, "cell")
 }

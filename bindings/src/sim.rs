@@ -255,6 +255,20 @@ impl Sim {
         Ok(out)
     }
     /// The parts this simulation is composed of.
+    /// The particle–particle law in use, resolved by the kernel (every field filled):
+    /// kn, kt, e_n or xi_n, xi_t_ratio, mu.
+    fn law<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        crate::build::law_dict(py, &self.inner.law())
+    }
+
+    /// The particle–wall law in use (None without walls).
+    fn wall_law<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.inner
+            .wall_law()
+            .map(|l| crate::build::law_dict(py, &l))
+            .transpose()
+    }
+
     fn components(&self) -> Vec<String> {
         self.inner.components()
     }
@@ -299,7 +313,11 @@ impl Sim {
     /// Per-particle contact stress sums S_i = sum_j r_ij (x) f_ij / 2 (walls in full; (N, 9),
     /// row-major xx xy xz yx ...) and contact power P_i = sum_j f_ij . v_ij / 2 ((N,), < 0 when
     /// dissipating), in id order, from the last evaluation that was asked for them.
-    #[allow(clippy::type_complexity, clippy::needless_range_loop)]
+    #[allow(
+        clippy::type_complexity,
+        clippy::needless_range_loop,
+        reason = "a (stress, power) pair of numpy arrays; rows filled by index in id order"
+    )]
     fn particle_stats<'py>(
         &self,
         py: Python<'py>,
@@ -336,7 +354,10 @@ impl Sim {
     }
     /// Pair contacts of the last force evaluation: ids (M, 2), r_ij = x_i - x_j (M, 3) and the
     /// force on i (M, 3).
-    #[allow(clippy::type_complexity)]
+    #[allow(
+        clippy::type_complexity,
+        reason = "(ids, branch vectors, forces) as three numpy arrays"
+    )]
     fn contacts<'py>(
         &self,
         py: Python<'py>,

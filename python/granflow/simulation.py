@@ -32,38 +32,39 @@ class ContactLaw:
 
     000 App. A (A1–A3), 002 §2.4 (2.17–2.19). ``form`` is 'hooke' (a = 0) or 'hertz' (a = 1/2).
     Damping: give ``e_n`` (restitution, the damping is derived per pair) or ``xi_n`` (rate, as
-    LAMMPS ``gamma_n``), not both; with neither, ``e_n = 0.82`` (000's value). ``kt`` defaults to
-    2/7 kn, ``xi_t_ratio`` to 1/2. With ``mu = 0`` the law carries no tangential history at all.
+    LAMMPS ``gamma_n``), not both. A field left at None takes the kernel's default
+    (``granflow::contact::LawSpec``, the one home of the defaults): ``kn = 1e6``, ``kt = 2/7 kn``,
+    ``e_n = 0.82`` (000's value) when neither e_n nor xi_n is given, ``xi_t_ratio = 1/2``,
+    ``mu = 0.5``. The defaults are filled on construction (so the fields and ``as_dict()`` show
+    the law the kernel uses); an invalid law keeps its fields as given and raises
+    :class:`granflow.ParameterError` from ``as_dict()`` (and so when a simulation is built).
+    With ``mu = 0`` the law carries no tangential history at all.
     """
 
-    DEFAULT_E_N: ClassVar[float] = 0.82
-
-    kn: float = 1e6
+    kn: float | None = None
     e_n: float | None = None
-    mu: float = 0.5
+    mu: float | None = None
     kt: float | None = None
     xi_n: float | None = None
-    xi_t_ratio: float = 0.5
+    xi_t_ratio: float | None = None
     form: str = "hooke"
 
+    _LAW_FIELDS: ClassVar[tuple[str, ...]] = ("kn", "kt", "e_n", "xi_n", "xi_t_ratio", "mu")
+
+    def _given(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in self._LAW_FIELDS if getattr(self, k) is not None}
+
     def __post_init__(self) -> None:
-        # neither damping given: 000's restitution, recorded so that parameters() shows it
-        if self.e_n is None and self.xi_n is None:
-            object.__setattr__(self, "e_n", self.DEFAULT_E_N)
+        try:
+            resolved = _core.resolve_law(self._given())
+        except ParameterError:
+            return  # kept as given: as_dict() raises the kernel's error
+        for k in self._LAW_FIELDS:
+            object.__setattr__(self, k, resolved.get(k))
 
     def as_dict(self) -> dict[str, float]:
-        d: dict[str, float] = {"kn": self.kn, "mu": self.mu, "xi_t_ratio": self.xi_t_ratio}
-        if self.kt is not None:
-            d["kt"] = self.kt
-        if self.xi_n is not None:
-            if self.e_n is not None:
-                raise ParameterError(
-                    f"invalid e_n = {self.e_n!r} with xi_n = {self.xi_n!r}: allowed one of e_n "
-                    "(restitution) or xi_n (damping rate), not both")
-            d["xi_n"] = self.xi_n
-        else:
-            d["e_n"] = self.DEFAULT_E_N if self.e_n is None else self.e_n
-        return d
+        """The law as the kernel resolves it: kn, kt, e_n or xi_n, xi_t_ratio, mu."""
+        return dict(_core.resolve_law(self._given()))
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 //! `BLOCK` particles:
 //! 1. the distance test over the block's listed pairs, appending the contacts (in list order)
 //!    to a per-thread buffer;
-//! 2. the contact law on lanes of `LANES` contacts (`crate::lanes`), and the sums of the
+//! 2. the contact law on lanes of `LANES` contacts (`crate::contact::lanes`), and the sums of the
 //!    forces and torques onto both particles in list order;
 //! 3. walls and gravity, particle by particle.
 //!
@@ -14,10 +14,10 @@
 
 use super::simd::{dispatch, Twin};
 use crate::components::{Body, Plane, Walls, MAX_WALLS};
+use crate::contact::lanes::{Ln, PairIn, V};
 use crate::contact::{Form, Friction, Law};
 use crate::domain::Domain;
 use crate::history::{Cursor, HistList};
-use crate::lanes::{Ln, PairIn, V};
 use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
 use crate::{M3, V3};
 use std::cell::RefCell;

@@ -31,7 +31,7 @@
 //! Tangential histories are stored per closed contact (`crate::history`), not per listed pair.
 
 use crate::components::{Body, Walls, MAX_WALLS};
-use crate::contact::{Form, Friction, Law, LawParams};
+use crate::contact::{Form, Friction, Law, LawSpec};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::history::HistList;
@@ -200,7 +200,7 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
-pub fn min_contact_time(params: &LawParams, p: &Particles) -> Result<f64> {
+pub fn min_contact_time(params: &LawSpec, p: &Particles) -> Result<f64> {
     let m = p.min_mass();
     params.contact_time(0.5 * m)
 }
@@ -213,7 +213,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     )]
     pub fn new(
         p: Particles,
-        law: LawParams,
+        law: LawSpec,
         domain: D,
         walls: W,
         body: G,
@@ -223,7 +223,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         if p.is_empty() {
             return Err(Error::param("particles", 0, "at least 1 particle"));
         }
-        let law = Law::<F, T>::new(law)?;
+        let law = Law::<F, T>::new(law);
         let tc = min_contact_time(&law.params, &p)?;
         if let Some(wl) = walls.law() {
             // wall contacts: m_eff = m (infinite wall mass); check they are not over-damped

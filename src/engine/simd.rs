@@ -1,6 +1,6 @@
 //! The one run-time choice of instruction set. Each hot pass over a chunk has a baseline body
 //! and an AVX2 twin that does the same IEEE operations in the same order (so the same bits);
-//! [`dispatch`] runs the twin when the CPU has AVX2 ([`crate::lanes::wide`]).
+//! [`dispatch`] runs the twin when the CPU has AVX2 ([`crate::contact::lanes::wide`]).
 
 /// A pass over one chunk with a baseline body and an AVX2 twin.
 pub(crate) trait Twin: Sized {
@@ -22,7 +22,7 @@ pub(crate) trait Twin: Sized {
 /// Run a pass with the instruction set chosen at run time.
 pub(crate) fn dispatch<K: Twin>(k: K) -> K::Out {
     #[cfg(target_arch = "x86_64")]
-    if crate::lanes::wide() {
+    if crate::contact::lanes::wide() {
         // SAFETY: `wide` checked that the CPU has AVX2
         return unsafe { avx2(k) };
     }

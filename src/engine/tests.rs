@@ -3,7 +3,7 @@
 //! (whose `common` module holds the public twins of the set-ups below).
 
 use crate::components::{Gravity, Plane, PlaneWalls};
-use crate::contact::{Coulomb, Form, Hooke, LawParams};
+use crate::contact::{Coulomb, Form, Hooke, LawSpec};
 use crate::domain::OrthoBox;
 use crate::engine::Engine;
 use crate::insert::{insert, SizeDist};
@@ -40,7 +40,7 @@ fn walled_gas<F: Form>(l: f64, seed: u64, e: f64, g: V3) -> WalledGas<F> {
     for x in p.x.iter_mut() {
         x.x = 0.6 + x.x * ((l - 1.2) / l);
     }
-    let law = LawParams::new(1e5, e, 0.5);
+    let law = LawSpec::new(1e5, e, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
     let walls = PlaneWalls::<F, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
     Engine::new(p, law, bx, walls, Gravity(g), None, 0.2).unwrap()

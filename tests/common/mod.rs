@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use granflow::components::{Gravity, NoBody, NoWalls, Plane, PlaneWalls};
-use granflow::contact::{Coulomb, Form, Hooke, LawParams};
+use granflow::contact::{Coulomb, Form, Hooke, LawSpec};
 use granflow::domain::OrthoBox;
 use granflow::engine::Engine;
 use granflow::insert::{insert, SizeDist};
@@ -44,7 +44,7 @@ pub type PeriodicEngine = Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody>;
 pub fn periodic(p: Particles, l: f64, e: f64, skin: f64) -> PeriodicEngine {
     Engine::new(
         p,
-        LawParams::new(1e5, e, 0.5),
+        LawSpec::new(1e5, e, 0.5),
         OrthoBox::periodic_cube(l).unwrap(),
         NoWalls,
         NoBody,
@@ -69,7 +69,7 @@ pub fn walled_gas<F: Form>(l: f64, seed: u64, e: f64, g: V3) -> WalledGas<F> {
     for x in p.x.iter_mut() {
         x.x = 0.6 + x.x * ((l - 1.2) / l);
     }
-    let law = LawParams::new(1e5, e, 0.5);
+    let law = LawSpec::new(1e5, e, 0.5);
     let bx = OrthoBox::new(V3::zeros(), V3::new(l, l, l), [false, true, true]).unwrap();
     let walls = PlaneWalls::<F, Coulomb>::new(Plane::pair_across(0, 0.0, l), law).unwrap();
     Engine::new(p, law, bx, walls, Gravity(g), None, 0.2).unwrap()

@@ -166,7 +166,7 @@ class Channel:
     def wall_law(self) -> ContactLaw:
         return _law(self.wall_kn or self.kn, self.wall_e_n or self.e_n,
                     self.mu if self.wall_mu is None else self.wall_mu,
-                    None if self.wall_kn is None else 2 / 7 * self.wall_kn,
+                    None,  # kt: the kernel's default, 2/7 of the wall's kn (LawSpec)
                     self.xi_t_ratio, self.form)
 
     def bin_edges(self) -> np.ndarray:

@@ -3,8 +3,8 @@
 //! baseline code, so the same bits).
 
 use super::{InnerChunk, Scratch, Shared};
+use crate::contact::lanes::{Ln, PairIn};
 use crate::contact::{Form, Friction};
-use crate::lanes::{Ln, PairIn};
 use std::arch::x86_64::*;
 
 /// Four 4-double records as four lanes of their components.

@@ -12,114 +12,14 @@
 //! The law is generic over its *form* (Hooke/Hertz) and its *friction* (Coulomb or none); with
 //! `Frictionless` the history type is `()`, so no history is allocated, stored or updated.
 
-use crate::error::{Error, Result};
-use crate::lanes::{Ln, PairIn, PairRes, V};
+pub mod lanes;
+pub mod spec;
+
+pub use spec::{Damping, LawInput, LawSpec};
+
 use crate::V3;
+use lanes::{Ln, PairIn, PairRes, V};
 use std::marker::PhantomData;
-
-/// How the user specifies the normal damping.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Damping {
-    /// Normal coefficient of restitution e_n in (0, 1]; the damping is derived per pair so that
-    /// every pair, whatever its effective mass, rebounds with exactly e_n (linear law; Hertz via a
-    /// velocity-independent dashpot, see [`Hertz`]).
-    Restitution(f64),
-    /// Damping rate xi_n (units 1/time) as in A1 / 2.17a: damping force = m_eff xi_n v_n.
-    Rate(f64),
-}
-
-/// User-level parameters of one contact law (particle–particle or particle–wall).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LawParams {
-    pub kn: f64,
-    /// Tangential stiffness; default 2/7 kn (000 App. A).
-    pub kt: f64,
-    pub damping: Damping,
-    /// xi_t / xi_n; default 1/2 (both papers).
-    pub xi_t_ratio: f64,
-    /// Coulomb friction coefficient mu (mu_p in 000, mu_s in 002).
-    pub mu: f64,
-}
-
-impl LawParams {
-    pub fn new(kn: f64, e_n: f64, mu: f64) -> Self {
-        LawParams {
-            kn,
-            kt: 2.0 / 7.0 * kn,
-            damping: Damping::Restitution(e_n),
-            xi_t_ratio: 0.5,
-            mu,
-        }
-    }
-
-    pub fn validate(&self, prefix: &str) -> Result<()> {
-        let name = |s: &str| format!("{prefix}{s}");
-        crate::error::check_positive(&name("kn"), self.kn)?;
-        if !(self.kt.is_finite() && self.kt >= 0.0) {
-            return Err(Error::param(name("kt"), self.kt, "a finite number >= 0"));
-        }
-        match self.damping {
-            Damping::Restitution(e) => {
-                if !(e.is_finite() && e > 0.0 && e <= 1.0) {
-                    return Err(Error::param(name("e_n"), e, "0 < e_n <= 1").with_hint(
-                        "e_n = 0 would need infinite damping; the linear law is critically \
-                         damped as e_n -> 0",
-                    ));
-                }
-            }
-            Damping::Rate(x) => {
-                if !(x.is_finite() && x >= 0.0) {
-                    return Err(Error::param(name("xi_n"), x, "a finite number >= 0"));
-                }
-            }
-        }
-        if !(self.xi_t_ratio.is_finite() && self.xi_t_ratio >= 0.0) {
-            return Err(Error::param(
-                name("xi_t_ratio"),
-                self.xi_t_ratio,
-                "a finite number >= 0",
-            ));
-        }
-        if !(self.mu.is_finite() && self.mu >= 0.0) {
-            return Err(Error::param(name("mu"), self.mu, "a finite number >= 0"));
-        }
-        Ok(())
-    }
-
-    /// zeta such that the per-pair damping rate is xi_n = zeta sqrt(kn/m_eff) for a given e_n:
-    /// from e_n = exp(-xi_n t_c/2), t_c = pi / sqrt(kn/m_eff - xi_n^2/4) (000 App. A) it follows
-    /// that zeta = 2|ln e| / sqrt(pi^2 + ln^2 e) (< 2, i.e. always under-damped).
-    pub fn zeta(e_n: f64) -> f64 {
-        let l = e_n.ln();
-        2.0 * l.abs() / (std::f64::consts::PI.powi(2) + l * l).sqrt()
-    }
-
-    /// Contact duration of the linear law for a pair of effective mass m_eff.
-    /// Errors if the pair is over-damped (no oscillation: the linear law has no t_c).
-    pub fn contact_time(&self, m_eff: f64) -> Result<f64> {
-        let w0sq = self.kn / m_eff;
-        let xi = match self.damping {
-            Damping::Restitution(e) => Self::zeta(e) * w0sq.sqrt(),
-            Damping::Rate(x) => x,
-        };
-        let arg = w0sq - 0.25 * xi * xi;
-        if arg <= 0.0 {
-            return Err(Error::param(
-                "xi_n",
-                xi,
-                format!(
-                    "< 2 sqrt(kn/m_eff) = {:.6e} for the lightest pair (m_eff = {m_eff:.4e})",
-                    2.0 * w0sq.sqrt()
-                ),
-            )
-            .with_hint(
-                "the linear spring-dashpot is over-damped there: it has no contact time and no \
-                 restitution; give e_n instead or reduce xi_n",
-            ));
-        }
-        Ok(std::f64::consts::PI / arg.sqrt())
-    }
-}
 
 /// Normal form of the law: linear (a = 0) or Hertzian (a = 1/2).
 pub trait Form: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
@@ -130,7 +30,7 @@ pub trait Form: Copy + Send + Sync + 'static + Default + std::fmt::Debug {
     fn elastic_energy(kn: f64, delta: f64, d: f64) -> f64;
     /// Dimensionless damping zeta = c / sqrt(kn m_eff) that gives restitution e_n.
     fn zeta(e_n: f64) -> f64 {
-        LawParams::zeta(e_n)
+        LawSpec::zeta(e_n)
     }
 }
 
@@ -265,7 +165,7 @@ impl Friction for Coulomb {
 /// A contact law ready to evaluate: form `F`, friction `T`.
 #[derive(Clone, Copy, Debug)]
 pub struct Law<F: Form, T: Friction> {
-    pub params: LawParams,
+    pub params: LawSpec,
     kn: f64,
     kt: f64,
     /// Normal damping coefficient (force per velocity) = alpha m_eff + beta sqrt(m_eff): covers
@@ -287,13 +187,13 @@ pub struct PairForce {
 }
 
 impl<F: Form, T: Friction> Law<F, T> {
-    pub fn new(params: LawParams) -> Result<Self> {
-        params.validate("")?;
+    /// The law of a resolved spec ([`LawSpec::resolve`] validated it; it is not checked again).
+    pub fn new(params: LawSpec) -> Self {
         let (alpha, beta, tsuji) = match params.damping {
             Damping::Restitution(e) => (0.0, F::zeta(e) * params.kn.sqrt(), true),
             Damping::Rate(x) => (x, 0.0, false),
         };
-        Ok(Law {
+        Law {
             params,
             kn: params.kn,
             kt: params.kt,
@@ -303,7 +203,7 @@ impl<F: Form, T: Friction> Law<F, T> {
             mu: params.mu,
             tsuji,
             _p: PhantomData,
-        })
+        }
     }
 
     pub fn name() -> String {
@@ -316,7 +216,7 @@ impl<F: Form, T: Friction> Law<F, T> {
         self.alpha * m_eff + self.beta * m_eff.sqrt()
     }
 
-    /// The pair law on `L` contacts at once (`crate::lanes`): the geometry and the reduced mass
+    /// The pair law on `L` contacts at once (`crate::contact::lanes`): the geometry and the reduced mass
     /// from the branch vector (the normal from j to i, the lever arms r R_i/(R_i+R_j)), the
     /// relative surface velocity, then [`Law::law_core`]. `stream`: add the streaming
     /// velocity difference `c.sv` (a deforming cell).
@@ -365,7 +265,10 @@ impl<F: Form, T: Friction> Law<F, T> {
     /// tangential force (on i) and the updated displacement. The branches of the history
     /// rotation and of the Coulomb cap are selects, so one code serves lanes of pairs and
     /// single wall contacts (L = 1).
-    #[allow(clippy::too_many_arguments)]
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the law's inputs on lanes, inlined into the force loop: each stays its own register"
+    )]
     #[inline(always)]
     fn law_core<const L: usize>(
         &self,
@@ -421,7 +324,10 @@ impl<F: Form, T: Friction> Law<F, T> {
     /// `n`: unit normal (from j to i), `delta` > 0 overlap, `d` pair mean diameter,
     /// `vrel`: relative surface velocity of i w.r.t. j at the contact.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "one contact's geometry, mass, velocity and history, as in 002 (2.17)"
+    )]
     pub fn eval(
         &self,
         n: &V3,

@@ -44,7 +44,10 @@ impl<const L: usize> Ln<L> {
     #[inline(always)]
     fn cmp(self, b: Self, f: impl Fn(f64, f64) -> bool) -> Mask<L> {
         let mut o = [false; L];
-        #[allow(clippy::needless_range_loop)]
+        #[allow(
+            clippy::needless_range_loop,
+            reason = "lane by lane over arrays of the same const length L"
+        )]
         for l in 0..L {
             o[l] = f(self.0[l], b.0[l]);
         }
@@ -81,7 +84,10 @@ impl<const L: usize> Mask<L> {
     #[inline(always)]
     pub fn select(self, a: Ln<L>, b: Ln<L>) -> Ln<L> {
         let mut o = b.0;
-        #[allow(clippy::needless_range_loop)]
+        #[allow(
+            clippy::needless_range_loop,
+            reason = "lane by lane over arrays of the same const length L"
+        )]
         for l in 0..L {
             if self.0[l] {
                 o[l] = a.0[l];
