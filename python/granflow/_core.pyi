@@ -25,6 +25,7 @@ __all__ = [
     "hertz_zeta",
     "contact_time",
     "cell_sim",
+    "resolve_law",
     "read_checkpoint_header",
     "core_round_trip_ns",
     "__version__",

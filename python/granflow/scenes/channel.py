@@ -228,7 +228,7 @@ class Channel:
                 if rel.diagnostics()["max_overlap"] < 0.01:
                     break
             x = rel.get_positions()
-        if self.kn > prep_law.kn and not compressed:
+        if self.kn > self.prep_kn and not compressed:
             # the soft pour leaves overlaps ~ load/prep_kn; relax them at the run's stiffness
             # (frictionless, damped, same geometry and load) so the release does not start with
             # a burst of stored elastic energy at large kn
