@@ -47,8 +47,6 @@ mod guards;
 mod integrate;
 mod simd;
 mod team;
-#[cfg(test)]
-mod tests;
 
 pub(crate) use chunk::ChunkOut;
 pub use chunk::PairOut;
@@ -113,7 +111,7 @@ pub struct Tuning {
     /// Room kept in the cross index for a prune inside a team (None: an eighth more, +64;
     /// Some(k): the index shrunk, then k more: for tests of the fallback, where a prune that
     /// needs more is done outside).
-    pub(crate) team_cross_room: Option<usize>,
+    pub team_cross_room: Option<usize>,
     /// Systems of at least this many particles run their team steps as one sweep per step
     /// (`team`: each chunk packed, then its forces computed while its records are in
     /// cache); smaller ones in two passes. The same bits either way.
@@ -121,7 +119,7 @@ pub struct Tuning {
     /// A fused sweep computes a step's forces before it is known whether the step must
     /// rebuild or prune first (then they are computed again): a step is fused only if it
     /// would not, were its largest drift speed this factor times the last one's.
-    pub(crate) fuse_margin: f64,
+    pub fuse_margin: f64,
 }
 
 impl Default for Tuning {
@@ -196,7 +194,7 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     /// A deforming cell's kinetic sum sum_i m_i v_i (x) v_i after the last final half-kick.
     kin_sum: M3,
     /// Prunes done inside team stints (a count for the tests).
-    pub(crate) team_prunes: u64,
+    pub team_prunes: u64,
 }
 
 /// Contact duration of the stiffest, lightest pair for a law and a particle set.
