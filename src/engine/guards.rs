@@ -1,35 +1,11 @@
 //! Run-time guards: a run that goes unstable stops with a clear error (the step, the particles
 //! involved, the likely cause) instead of writing NaN.
 
-use super::{Body, Engine, StepDiag, Walls};
+use super::{Body, Engine, Walls};
 use crate::contact::{Form, Friction};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use rayon::prelude::*;
-
-/// Run-time guards: stop with a clear error instead of writing NaN.
-#[derive(Clone, Debug)]
-pub struct Guards {
-    /// Largest overlap allowed, as a fraction of the pair mean diameter.
-    pub max_overlap: f64,
-    /// Check positions and velocities for NaN/inf every this many steps.
-    pub check_every: u64,
-}
-impl Guards {
-    /// Whether an evaluation's largest overlap breaks the guard (a NaN does).
-    pub fn overlap_exceeded(&self, d: &StepDiag) -> bool {
-        d.max_overlap.is_nan() || d.max_overlap > self.max_overlap
-    }
-}
-
-impl Default for Guards {
-    fn default() -> Self {
-        Guards {
-            max_overlap: 0.25,
-            check_every: 50,
-        }
-    }
-}
 
 impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W, G> {
     pub(super) fn check_overlap(&self) -> Result<()> {

@@ -48,11 +48,7 @@ mod integrate;
 mod simd;
 mod team;
 
-pub(crate) use chunk::ChunkOut;
 pub use chunk::PairOut;
-use forces::{inner_skin_for, reduce_outs};
-pub use guards::Guards;
-use integrate::{list_speed, Drift, KickOut, KickPass};
 
 /// Default of `Engine::fuse_from`: from this size on the records no longer fit the last-level
 /// cache, and reading them from cache in one fused sweep is faster (`benchmarks/NOTES.md`).
@@ -91,6 +87,30 @@ pub struct Timers {
     /// ... and the cross-chunk pass with the final half-kick, when not deferred to the next
     /// step's first pass.
     pub gather_phase: f64,
+}
+
+/// Run-time guards: stop with a clear error instead of writing NaN.
+#[derive(Clone, Debug)]
+pub struct Guards {
+    /// Largest overlap allowed, as a fraction of the pair mean diameter.
+    pub max_overlap: f64,
+    /// Check positions and velocities for NaN/inf every this many steps.
+    pub check_every: u64,
+}
+impl Guards {
+    /// Whether an evaluation's largest overlap breaks the guard (a NaN does).
+    pub fn overlap_exceeded(&self, d: &StepDiag) -> bool {
+        d.max_overlap.is_nan() || d.max_overlap > self.max_overlap
+    }
+}
+
+impl Default for Guards {
+    fn default() -> Self {
+        Guards {
+            max_overlap: 0.25,
+            check_every: 50,
+        }
+    }
 }
 
 /// Knobs that change how fast a run goes, never its results (the same bits for any setting;
@@ -561,13 +581,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 if let Some((done, exit)) = self.team_steps(budget) {
                     k += done;
                     match exit {
-                        team::TeamExit::Done => {}
-                        team::TeamExit::Overlap => {
+                        TeamExit::Done => {}
+                        TeamExit::Overlap => {
                             let r = self.check_overlap();
                             self.complete_step();
                             return r;
                         }
-                        team::TeamExit::Outside { moved } => {
+                        TeamExit::Outside { moved } => {
                             self.step_finish(moved, true, k + 1 < n, Instant::now())?;
                             k += 1;
                         }
@@ -678,6 +698,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         Ok(())
     }
+}
+
+/// How a team stint ended.
+enum TeamExit {
+    /// The steps asked for are done (the last one's cross pass deferred).
+    Done,
+    /// A step's first pass is done and the step needs what the team does not do (a build,
+    /// a prune, a failed domain check): `step_finish` completes it with this `moved`.
+    Outside { moved: bool },
+    /// The last step's force evaluation exceeded the overlap guard (`check_overlap` reports).
+    Overlap,
 }
 
 /// Freed bytes above which a trim of the contact lists returns the heap's free pages.

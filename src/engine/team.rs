@@ -31,7 +31,9 @@
 //! (two teams sharing a rayon pool could each hold one thread and wait for the other's);
 //! a run that finds the team taken steps the usual way. Measurements: `benchmarks/NOTES.md`.
 
-use super::chunk::{self, ChunkIo, Shared};
+use super::chunk::{self, ChunkIo, ChunkOut, Shared};
+use super::forces::{inner_skin_for, reduce_outs};
+use super::integrate::{list_speed, Drift, KickOut, KickPass};
 use super::*;
 use crate::neighbor::image_shifts;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -196,17 +198,6 @@ impl Claims {
 /// A claim flag alone on its 128 bytes (a line and its adjacent-line prefetch partner).
 #[repr(align(128))]
 struct Slot(AtomicUsize);
-
-/// How a team stint ended.
-pub(super) enum TeamExit {
-    /// The steps asked for are done (the last one's cross pass deferred).
-    Done,
-    /// A step's first pass is done and the step needs what the team does not do (a build,
-    /// a prune, a failed domain check): `step_finish` completes it with this `moved`.
-    Outside { moved: bool },
-    /// The last step's force evaluation exceeded the overlap guard (`check_overlap` reports).
-    Overlap,
-}
 
 /// The displacement bounds each thread keeps (the same on all: they see the same drifts).
 #[derive(Clone, Copy)]
@@ -520,8 +511,8 @@ where
                 }
                 let nl = if prune_here {
                     // `Engine::prune` (same inner skin, same chunks), its chunks shared out
-                    let speed = super::list_speed(track.vmax2, dom.affine_rate(), nl.cut);
-                    let s_in = super::inner_skin_for(prune_steps, nl.skin, speed, dt);
+                    let speed = list_speed(track.vmax2, dom.affine_rate(), nl.cut);
+                    let s_in = inner_skin_for(prune_steps, nl.skin, speed, dt);
                     let shifts = image_shifts(&dom.h());
                     // SAFETY: the records are only read until the next pass
                     let xr = unsafe { pxr.slice(0..n) };
