@@ -1,6 +1,6 @@
 //! Set-ups shared by the kernel's integration tests (`tests/*.rs`, each its own binary; a
 //! binary uses only some of them).
-#![allow(dead_code)]
+#![allow(dead_code, reason = "each test binary uses only some of the set-ups")]
 
 use granflow::components::{Gravity, NoBody, NoWalls, Plane, PlaneWalls};
 use granflow::contact::{Coulomb, Form, Hooke, LawSpec};
@@ -84,4 +84,21 @@ pub fn walled_channel<F: Form>(l: f64, steps: u64) -> WalledGas<F> {
     s.want_stats = true;
     s.run(1).unwrap();
     s
+}
+
+/// Everything a walled run carries between steps, for bitwise comparisons.
+pub fn walled_state<F: Form>(s: &WalledGas<F>) -> (Vec<[f64; 9]>, Vec<f64>, u64) {
+    let mut by_id = vec![[0.0; 9]; s.p.len()];
+    for i in 0..s.p.len() {
+        let (x, v, w) = (s.p.x[i], s.p.v[i], s.p.omega[i]);
+        by_id[s.p.id[i] as usize] = [x.x, x.y, x.z, v.x, v.y, v.z, w.x, w.y, w.z];
+    }
+    let mut scalars: Vec<f64> = s
+        .wall_impulse
+        .iter()
+        .flat_map(|w| w.iter().copied())
+        .collect();
+    scalars.extend(s.diag.wall_force.iter().flat_map(|w| w.iter().copied()));
+    scalars.extend([s.time, s.diag.max_overlap, s.diag.contacts as f64]);
+    (by_id, scalars, s.step)
 }
