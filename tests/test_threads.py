@@ -69,7 +69,7 @@ def test_simultaneous_simulations_same_bits() -> None:
 
 def _large_walled(threads: int) -> gf.Simulation:
     """A frictional gas of 70 560 particles (past the size from which a team step is one
-    fused sweep, ``FUSE_N`` in ``src/engine.rs``) between walls, with gravity."""
+    fused sweep, ``FUSE_N`` in ``src/engine/mod.rs``) between walls, with gravity."""
     nx, ny, nz = 42, 42, 40
     g = np.stack(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"), -1)
     x = 0.8 + 1.12 * g.reshape(-1, 3).astype(float)
