@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{free_box, gas, Free};
+use common::{free_box, gas, periodic, Free};
 use granflow::components::{NoBody, NoWalls};
 use granflow::contact::{Coulomb, Frictionless, Hooke, LawSpec};
 use granflow::domain::{Domain, OrthoBox};
@@ -74,17 +74,7 @@ fn momentum_and_angular_momentum_conserved() {
         3,
         SizeDist::Discrete(vec![(0.9, 0.3), (1.0, 0.4), (1.1, 0.3)]),
     );
-    let law = LawSpec::new(1e5, 0.7, 0.5);
-    let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-        p,
-        law,
-        OrthoBox::periodic_cube(l).unwrap(),
-        NoWalls,
-        NoBody,
-        None,
-        0.2,
-    )
-    .unwrap();
+    let mut s = periodic(p, l, 0.7, 0.2);
     let p0 = s.p.momentum();
     let scale: f64 = s.p.mass.iter().zip(&s.p.v).map(|(m, v)| m * v.norm()).sum();
     s.run(2000).unwrap();
@@ -102,6 +92,7 @@ fn momentum_and_angular_momentum_conserved() {
     for x in p.x.iter_mut() {
         *x += V3::new(7.0, 7.0, 7.0);
     }
+    let law = LawSpec::new(1e5, 0.7, 0.5);
     let mut s: Free<Hooke, Coulomb> =
         Engine::new(p, law, free_box(), NoWalls, NoBody, None, 0.2).unwrap();
     let ang = |s: &Free<Hooke, Coulomb>| -> V3 {

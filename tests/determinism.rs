@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{gas, periodic_gas, walled_channel, walled_gas, walled_state};
+use common::{gas, periodic, periodic_gas, walled_channel, walled_gas, walled_state};
 use granflow::checkpoint::{Reader, Writer};
 use granflow::components::{NoBody, NoWalls};
 use granflow::contact::{Coulomb, Frictionless, Hertz, Hooke, LawSpec};
@@ -29,17 +29,7 @@ fn dense_packing_run(threads: usize) -> Vec<V3> {
             11,
             SizeDist::Discrete(vec![(0.9, 0.3), (1.0, 0.4), (1.1, 0.3)]),
         );
-        let law = LawSpec::new(1e5, 0.8, 0.5);
-        let mut s: Engine<Hooke, Coulomb, OrthoBox, NoWalls, NoBody> = Engine::new(
-            p,
-            law,
-            OrthoBox::periodic_cube(l).unwrap(),
-            NoWalls,
-            NoBody,
-            None,
-            0.2,
-        )
-        .unwrap();
+        let mut s = periodic(p, l, 0.8, 0.2);
         s.run(1000).unwrap();
         let mut out = vec![V3::zeros(); s.p.len()];
         for i in 0..s.p.len() {

@@ -63,7 +63,7 @@ fn law_input(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawInput> {
 
 /// Parse a contact-law dict into a resolved, validated law (`LawSpec::resolve`).
 pub fn parse_law(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawSpec> {
-    law_input(d, prefix)?.resolve(prefix).py_err()
+    LawSpec::resolve(&law_input(d, prefix)?, prefix).py_err()
 }
 
 /// A resolved law as a dict: kn, kt, e_n or xi_n, xi_t_ratio, mu.
@@ -229,12 +229,11 @@ fn diameters_for_volume(
 #[pyfunction]
 fn hertz_zeta(e_n: f64) -> PyResult<f64> {
     // e_n checked as the law checks it
-    LawInput {
+    let input = LawInput {
         e_n: Some(e_n),
         ..LawInput::default()
-    }
-    .resolve("")
-    .py_err()?;
+    };
+    LawSpec::resolve(&input, "").py_err()?;
     Ok(<Hertz as Form>::zeta(e_n))
 }
 

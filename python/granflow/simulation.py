@@ -170,10 +170,7 @@ class Simulation:
             def hook() -> None:
                 self.save_checkpoint(path)
 
-        elif checkpoint_every is not None:
-            raise ParameterError(
-                f"invalid checkpoint_every = {checkpoint_every} without checkpoint: allowed "
-                "with a checkpoint path")
+        check_checkpoint_args(checkpoint, checkpoint_every)
         run_chunked(self._sim, steps, progress, self, every=checkpoint_every, on_every=hook,
                     on_stop=hook)
         if hook is not None and not (checkpoint_every and self.step % checkpoint_every == 0
@@ -312,6 +309,18 @@ class _Terminated(BaseException):
     """Raised inside a run when SIGTERM arrives, so the run stops between steps."""
 
 
+def check_checkpoint_args(checkpoint: str | os.PathLike | None,
+                          checkpoint_every: int | None) -> None:
+    """The checks of a run's ``checkpoint`` / ``checkpoint_every`` arguments (every ``run`` of
+    the package takes them): ``checkpoint_every`` >= 1, and only with a checkpoint path."""
+    if checkpoint_every is not None and int(checkpoint_every) < 1:
+        raise ParameterError(f"invalid checkpoint_every = {checkpoint_every}: allowed >= 1")
+    if checkpoint is None and checkpoint_every is not None:
+        raise ParameterError(
+            f"invalid checkpoint_every = {checkpoint_every} without checkpoint: allowed "
+            "with a checkpoint path")
+
+
 def run_chunked(
     sim: _core.Sim,
     steps: int,
@@ -430,6 +439,7 @@ __all__ = [
     "Wall",
     "maxwell_velocities",
     "random_packing",
+    "check_checkpoint_args",
     "run_chunked",
     "to_table",
 ]

@@ -16,6 +16,7 @@ import pyarrow as pa
 
 from granflow import _core
 from granflow.errors import ParameterError
+from granflow.simulation import check_checkpoint_args
 
 SCENES: dict[str, type] = {}
 
@@ -105,13 +106,8 @@ def run_with_checkpoints(
     steps = int(steps)
     if steps < 0:
         raise ParameterError(f"invalid steps = {steps}: allowed >= 0")
-    if checkpoint_every is not None and int(checkpoint_every) < 1:
-        raise ParameterError(f"invalid checkpoint_every = {checkpoint_every}: allowed >= 1")
+    check_checkpoint_args(checkpoint, checkpoint_every)
     if checkpoint is None:
-        if checkpoint_every is not None:
-            raise ParameterError(
-                f"invalid checkpoint_every = {checkpoint_every} without checkpoint: allowed "
-                "with a checkpoint path")
         advance(steps)
         return
     every = int(checkpoint_every) if checkpoint_every is not None else 0
