@@ -76,7 +76,8 @@ def run_one(src: Channel, kn: float, a: argparse.Namespace, out: Path,
         c = min(chunk, steps - done)
         ch.run(c, progress=False)
         done += c
-        vy = ch._series[-1]["vcm_y"]  # the last sample (not the whole table every chunk)
+        last = ch._tables.last("series")  # the last sample (not the whole table every chunk)
+        vy = last["vcm_y"] if last else float("nan")
         print(f"  kn = {kn:.0e}  t = {ch.sim.time:6.1f}  vcm_y = {vy:8.4f}  "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
     wall = time.perf_counter() - t0

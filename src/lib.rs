@@ -21,6 +21,7 @@ pub mod neighbor;
 pub mod particles;
 pub mod probe;
 pub mod rng;
+pub mod sampling;
 pub mod scene;
 pub mod sim;
 pub mod table;

@@ -50,10 +50,12 @@ pub trait Simulation: Send + Sync {
     fn wall_impulse(&self) -> Vec<crate::V3> {
         Vec::new()
     }
-    /// Tables produced by samplers since the last call (name, table). Default: none.
-    fn take_tables(&mut self) -> Vec<(String, Table)> {
-        Vec::new()
-    }
+    /// Add a sampler (`crate::sampling::make`: kind, trigger, window, bins, columns).
+    fn add_sampler(&mut self, kind: &str, spec: crate::sampling::SamplerSpec) -> Result<()>;
+    /// The kinds and tables of the samplers configured, in order.
+    fn samplers(&self) -> Vec<(String, String)>;
+    /// Tables closed by the samplers since the last call (table name, table), oldest first.
+    fn take_tables(&mut self) -> Vec<(String, Table)>;
     /// Volume of the domain.
     fn volume(&self) -> f64;
     /// Cell matrix (columns = cell vectors) and origin.
@@ -165,6 +167,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             (
                 "wall history".to_string(),
                 list_bytes(&self.whist, &self.whist_next),
+            ),
+            (
+                "contact records for samplers".to_string(),
+                self.crecs.iter().map(vec_bytes).sum(),
+            ),
+            (
+                "samplers".to_string(),
+                self.samplers.iter().map(|s| s.bytes()).sum(),
             ),
         ]
     }
@@ -316,6 +326,23 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     fn load_checkpoint(&mut self, r: &crate::checkpoint::Reader) -> Result<()> {
         self.load_state(r)
     }
+    fn add_sampler(&mut self, kind: &str, spec: crate::sampling::SamplerSpec) -> Result<()> {
+        Engine::add_sampler(self, kind, spec)
+    }
+    fn samplers(&self) -> Vec<(String, String)> {
+        self.samplers
+            .iter()
+            .map(|s| (s.kind().to_string(), s.table().to_string()))
+            .collect()
+    }
+    fn take_tables(&mut self) -> Vec<(String, Table)> {
+        let mut out = Vec::new();
+        for s in self.samplers.iter_mut() {
+            let name = s.table();
+            out.extend(s.take().into_iter().map(|t| (name.to_string(), t)));
+        }
+        out
+    }
 }
 
 use crate::checkpoint::{flat_v3, unflat_v3, Reader, Writer};
@@ -392,6 +419,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .flat_map(|v| [v.x, v.y, v.z])
             .collect();
         w.f64s("walls.force", &wf);
+        // the samplers' open windows (closed ones are taken by the front end before saving)
+        for s in &self.samplers {
+            w.f64s(&format!("sampler.{}", s.kind()), &s.save());
+        }
     }
 
     fn kind_string(&self) -> String {
@@ -534,6 +565,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         for (k, c) in r.f64s("walls.force")?.chunks_exact(3).enumerate() {
             self.diag.wall_force[k] = crate::V3::new(c[0], c[1], c[2]);
+        }
+        // a sampler absent from the checkpoint starts a fresh window
+        for s in self.samplers.iter_mut() {
+            let key = format!("sampler.{}", s.kind());
+            if r.has(&key) {
+                s.load(&r.f64s(&key)?)?;
+            }
         }
         let st = r.u64s("engine.step")?;
         let tt = r.f64s("engine.time")?;

@@ -4,7 +4,8 @@ import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
-from granflow.scenes.channel import Channel, cap_volume_below
+from granflow.scenes.channel import Channel
+from reference_samplers import cap_volume_below
 
 
 @pytest.fixture(scope="module")

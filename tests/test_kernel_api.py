@@ -112,15 +112,6 @@ def test_momentum_conserved_without_gravity(gas, make_sim):
     assert np.abs(p1 - p0).max() < 1e-12 * scale
 
 
-def test_arrow_batch_roundtrip_without_copy_semantics():
-    # tables from the kernel come through the Arrow C data interface
-    box = gf.Box(length=(6.0, 6.0, 6.0))
-    x, d = gf.random_packing(gf.sizes.mono(1.0), box, 0.2, seed=1)
-    s = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e5))
-    assert s.core.take_tables() == []  # a plain box has no samplers: nothing to pay for
-    assert isinstance(pa.schema([]), pa.Schema)
-
-
 def test_damping_given_twice_is_refused():
     # e_n equal to the default and xi_n: still two damping specifications
     with pytest.raises(gf.ParameterError, match="e_n"):

@@ -26,19 +26,20 @@ struct SendArray(arrow_array::ffi::FFI_ArrowArray);
 unsafe impl Send for SendArray {}
 
 impl ArrowBatch {
-    pub fn from_table(name: &str, t: &Table) -> Self {
+    /// Take a table's columns over (their buffers become the Arrow arrays' without a copy).
+    pub fn from_table(name: &str, t: Table) -> Self {
         let mut fields = Vec::with_capacity(t.columns.len());
         let mut arrays: Vec<ArrayRef> = Vec::with_capacity(t.columns.len());
-        for (cname, unit, col) in &t.columns {
-            let md: HashMap<String, String> = [("unit".to_string(), unit.clone())].into();
+        for (cname, unit, col) in t.columns {
+            let md: HashMap<String, String> = [("unit".to_string(), unit)].into();
             match col {
                 Column::F64(v) => {
                     fields.push(Field::new(cname, DataType::Float64, false).with_metadata(md));
-                    arrays.push(Arc::new(Float64Array::from(v.clone())));
+                    arrays.push(Arc::new(Float64Array::from(v)));
                 }
                 Column::I64(v) => {
                     fields.push(Field::new(cname, DataType::Int64, false).with_metadata(md));
-                    arrays.push(Arc::new(Int64Array::from(v.clone())));
+                    arrays.push(Arc::new(Int64Array::from(v)));
                 }
             }
         }
@@ -49,7 +50,7 @@ impl ArrowBatch {
         };
         ArrowBatch {
             array,
-            metadata: t.metadata.iter().cloned().collect(),
+            metadata: t.metadata.into_iter().collect(),
             name: name.to_string(),
         }
     }

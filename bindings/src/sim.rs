@@ -389,12 +389,43 @@ impl Sim {
             .map(|v| [v.x, v.y, v.z])
             .collect()
     }
-    /// Sample tables produced since the last call.
+    /// Add a sampler that runs inside the step loop every `every` steps (at multiples of it in
+    /// the step count): `kind` one of "channel_bins" (needs `window` and the bin `edges`
+    /// from x = 0 to x = W), "channel_series", "cell_series"; `columns` keeps only those.
+    /// Its tables come out of `take_tables` as Arrow batches.
+    #[pyo3(signature = (kind, every, window=1, edges=None, columns=None))]
+    fn add_sampler(
+        &mut self,
+        kind: &str,
+        every: i64,
+        window: i64,
+        edges: Option<Vec<f64>>,
+        columns: Option<Vec<String>>,
+    ) -> PyResult<()> {
+        let count = |name: &str, v: i64, what: &str| -> PyResult<u64> {
+            u64::try_from(v)
+                .ok()
+                .filter(|&v| v >= 1)
+                .ok_or_else(|| param_err(&format!("{kind}.{name}"), v, what))
+        };
+        let spec = granflow::sampling::SamplerSpec {
+            every: count("every", every, "an integer >= 1 (steps between samples)")?,
+            window: count("window", window, "an integer >= 1 (samples per window)")?,
+            edges: edges.unwrap_or_default(),
+            columns,
+        };
+        self.inner.add_sampler(kind, spec).py_err()
+    }
+    /// The configured samplers as (kind, table) pairs.
+    fn samplers(&self) -> Vec<(String, String)> {
+        self.inner.samplers()
+    }
+    /// Sample tables closed since the last call, as Arrow batches (oldest first).
     fn take_tables(&mut self) -> Vec<ArrowBatch> {
         self.inner
             .take_tables()
             .into_iter()
-            .map(|(name, t)| ArrowBatch::from_table(&name, &t))
+            .map(|(name, t)| ArrowBatch::from_table(&name, t))
             .collect()
     }
 }

@@ -196,8 +196,11 @@ class Simulation:
         self._sim.save_checkpoint(os.fspath(path), json.dumps(self._rebuild_params()))
 
     @classmethod
-    def from_checkpoint(cls, path: str | os.PathLike, threads: int | None = None) -> Simulation:
-        """Rebuild a simulation from a checkpoint; it continues bitwise identically."""
+    def from_checkpoint(cls, path: str | os.PathLike, threads: int | None = None,
+                        configure: Callable[[_core.Sim], None] | None = None) -> Simulation:
+        """Rebuild a simulation from a checkpoint; it continues bitwise identically.
+        ``configure(core)`` runs before the state is loaded (a scene adds its samplers there,
+        so that their open windows are restored too)."""
         scene, params, x, d = _core.read_checkpoint_header(os.fspath(path))
         p = json.loads(params)
         if p.get("class") != "Simulation":
@@ -219,6 +222,8 @@ class Simulation:
             skin=p["skin"],
             threads=threads,
         )
+        if configure is not None:
+            configure(sim._sim)
         sim._sim.load_checkpoint(os.fspath(path))
         return sim
 

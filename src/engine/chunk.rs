@@ -19,6 +19,7 @@ use crate::contact::{Form, Friction, Law};
 use crate::domain::Domain;
 use crate::history::{Cursor, HistList};
 use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
+use crate::sampling::{ContactRec, WALL};
 use crate::{M3, V3};
 use std::cell::RefCell;
 use std::marker::PhantomData;
@@ -103,6 +104,8 @@ pub(crate) struct ChunkIo<'a, H> {
     pub cstat: &'a mut Vec<[f64; 10]>,
     pub cidx: &'a mut [u32],
     pub ps: &'a mut [[f64; 10]],
+    /// The chunk's contacts for samplers (written only by an evaluation with statistics).
+    pub crec: &'a mut Vec<ContactRec>,
 }
 
 /// Per-thread contact buffer of a block, sized to the largest block seen (no allocation per
@@ -246,6 +249,7 @@ where
         cstat,
         cidx,
         ps,
+        crec,
     } = io;
     // The chunk's growing lists are worked on as locals and put back at the end: their
     // headers lie side by side with the other chunks' (two or three to a cache line), so a
@@ -270,6 +274,9 @@ where
     wnew.clear();
     cross.clear();
     cstat.clear();
+    if STATS {
+        crec.clear();
+    }
     if G::ON {
         // the body force first: one store per particle instead of a zero and a late add
         let m = &s.mass[i0..i1];
@@ -322,6 +329,7 @@ where
             cstat: &mut *cstat,
             cidx: &mut *cidx,
             ps: &mut *ps,
+            crec: &mut *crec,
             out: &mut out,
         };
         law_and_sums::<F, T, D, STATS, VIR, AVX>(s, sc, nc, &mut hc, hnew, &mut sums);
@@ -346,7 +354,7 @@ where
         while m != 0 {
             let i = b0 + m.trailing_zeros() as usize;
             m &= m - 1;
-            wall_contacts::<F, T, W, STATS>(s, i, i0, fo, to, ps, &mut wc, wnew, &mut out);
+            wall_contacts::<F, T, W, STATS>(s, i, i0, fo, to, ps, crec, &mut wc, wnew, &mut out);
         }
         b0 = b1;
     }
@@ -421,6 +429,7 @@ struct Sums<'a, 'b> {
     cstat: &'a mut Vec<[f64; 10]>,
     cidx: &'a mut [u32],
     ps: &'a mut [[f64; 10]],
+    crec: &'a mut Vec<ContactRec>,
     out: &'b mut ChunkOut,
 }
 
@@ -608,6 +617,12 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
                     *a = *b;
                 }
                 rec[9] = 0.5 * f.dot(&vrel);
+                o.crec.push(ContactRec {
+                    i: i as u32,
+                    j: j as u32,
+                    d,
+                    f,
+                });
                 add10(&mut o.ps[li], &rec);
                 if is_cross {
                     o.cstat.push(rec);
@@ -646,6 +661,7 @@ fn wall_contacts<F, T, W, const STATS: bool>(
     fo: &mut [V3],
     to: &mut [V3],
     ps: &mut [[f64; 10]],
+    crec: &mut Vec<ContactRec>,
     wc: &mut Cursor<T::History>,
     wnew: &mut HistList<T::History>,
     out: &mut ChunkOut,
@@ -697,6 +713,12 @@ fn wall_contacts<F, T, W, const STATS: bool>(
             out.wall_force[w] -= pf.f;
             if STATS {
                 // branch vector from the contact point on the wall to the centre
+                crec.push(ContactRec {
+                    i: i as u32,
+                    j: WALL,
+                    d: gap * nrm,
+                    f: pf.f,
+                });
                 let full = (gap * nrm) * pf.f.transpose();
                 let acc = &mut ps[li];
                 for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {

@@ -175,8 +175,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             .zip(self.cross_stats.iter_mut())
             .zip(cidx_pieces)
             .zip(ps_pieces.drain(..))
+            .zip(self.crecs.iter_mut())
             .map(
-                |(((((((((fo, to), hold), hnew), wold), wnew), cross), cstat), cidx), ps)| {
+                |(
+                    (((((((((fo, to), hold), hnew), wold), wnew), cross), cstat), cidx), ps),
+                    crec,
+                )| {
                     ChunkIo {
                         fo,
                         to,
@@ -188,6 +192,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                         cstat,
                         cidx,
                         ps,
+                        crec,
                     }
                 },
             )

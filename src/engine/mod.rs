@@ -37,6 +37,7 @@ use crate::error::{Error, Result};
 use crate::history::HistList;
 use crate::neighbor::{chunk_size, NeighborList};
 use crate::particles::Particles;
+use crate::sampling::{ContactRec, SampleView, Sampler};
 use crate::{M3, V3};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -200,6 +201,10 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub(crate) cross_idx: Vec<u32>,
     /// Their stress/power records when `want_stats`.
     cross_stats: Vec<Vec<[f64; 10]>>,
+    /// Per chunk, the contacts of the last evaluation with `want_stats` (for samplers).
+    pub(crate) crecs: Vec<Vec<ContactRec>>,
+    /// Statistics taken inside the step loop on their triggers (`crate::sampling`).
+    pub samplers: Vec<Box<dyn Sampler>>,
     /// Total energy at the first guard check (closed systems only).
     energy_ref: Option<f64>,
     forces_valid: bool,
@@ -317,6 +322,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross: Vec::new(),
             cross_idx: Vec::new(),
             cross_stats: Vec::new(),
+            crecs: Vec::new(),
+            samplers: Vec::new(),
             energy_ref: None,
             forces_valid: false,
             tuning: Tuning::default(),
@@ -395,6 +402,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.whist_next.resize_with(nchunks, HistList::default);
         self.cross.resize_with(nchunks, Vec::new);
         self.cross_stats.resize_with(nchunks, Vec::new);
+        self.crecs.resize_with(nchunks, Vec::new);
         self.cross_idx.clear();
     }
 
@@ -570,13 +578,24 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         Ok(())
     }
 
-    /// Advance `n` steps.
+    /// Advance `n` steps; samplers sample after the steps their triggers name.
     pub fn run(&mut self, n: u64) -> Result<()> {
         self.ensure_forces()?;
         let mut k = 0;
         while k < n {
-            // plain steps that need nothing but forces run in one team of threads
-            let budget = self.team_budget(n - k);
+            // steps to the next sampled one (u64::MAX without samplers)
+            let to_sample = crate::sampling::steps_to_next(&self.samplers, self.step);
+            if to_sample == 1 {
+                // its evaluation keeps the contact records and per-particle sums
+                self.want_stats = true;
+                self.step_once(k + 1 < n)?;
+                k += 1;
+                self.sample()?;
+                continue;
+            }
+            // plain steps that need nothing but forces run in one team of threads (the team
+            // stops before a sampled step)
+            let budget = self.team_budget(n - k).min(to_sample - 1);
             if budget > 0 && self.team_ready() {
                 if let Some((done, exit)) = self.team_steps(budget) {
                     k += done;
@@ -598,6 +617,57 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.step_once(k + 1 < n)?;
             k += 1;
         }
+        Ok(())
+    }
+
+    /// Hand the state after a sampled step to the samplers due at this step.
+    fn sample(&mut self) -> Result<()> {
+        let nw = self.walls.planes().len();
+        let view = SampleView {
+            step: self.step,
+            time: self.time,
+            p: &self.p,
+            pstats: &self.pstats,
+            contacts: &self.crecs,
+            n_contacts: self.diag.contacts,
+            max_overlap: self.diag.max_overlap,
+            wall_force: &self.diag.wall_force[..nw],
+            wall_impulse: &self.wall_impulse[..nw],
+            h: self.domain.h(),
+            widths: self.domain.widths().into(),
+            observables: self.domain.observables(),
+        };
+        let step = self.step;
+        for s in self.samplers.iter_mut() {
+            if step.is_multiple_of(s.every()) {
+                s.sample(&view)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Add a sampler of `kind` (`crate::sampling::make`); it samples from the next step on.
+    pub fn add_sampler(&mut self, kind: &str, spec: crate::sampling::SamplerSpec) -> Result<()> {
+        let planes = self.walls.planes().len();
+        let setup = crate::sampling::Setup {
+            p: &self.p,
+            h: self.domain.h(),
+            widths: self.domain.widths().into(),
+            periodic: self.domain.periodic(),
+            walls: planes,
+        };
+        let s = crate::sampling::make(kind, spec, &setup)?;
+        if self.samplers.iter().any(|o| o.table() == s.table()) {
+            return Err(Error::param(
+                "sampler",
+                kind,
+                format!(
+                    "one sampler per table: this simulation has a '{}' table already",
+                    s.table()
+                ),
+            ));
+        }
+        self.samplers.push(s);
         Ok(())
     }
 

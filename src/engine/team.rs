@@ -304,6 +304,8 @@ where
         ];
         let pcross = Ptr(self.cross.as_mut_ptr());
         let pcstat = Ptr(self.cross_stats.as_mut_ptr());
+        // (a team step keeps no statistics: the contact records are never written)
+        let pcrec = Ptr(self.crecs.as_mut_ptr());
         // room for the cross index of a prune inside the team (it must not move: every
         // thread holds its address); a prune that needs more is done outside
         let more_cross = match self.tuning.team_cross_room {
@@ -424,6 +426,7 @@ where
                             cstat: &mut *pcstat.0.add(c),
                             cidx: pcidx.slice_mut(c0..c1),
                             ps: &mut [],
+                            crec: &mut *pcrec.get().add(c),
                         };
                         chunk::chunk::<F, T, D, W, G, false, false>(shared, c, io)
                     };

@@ -1,5 +1,6 @@
-"""What every scene shares: the scene table, the key check, the :class:`Scene` protocol and the
-run loop that honours ``checkpoint`` / ``checkpoint_every``.
+"""What every scene shares: the scene table, the key check, the :class:`Scene` protocol, the
+sample tables drained from the kernel's samplers and the run loop that honours ``checkpoint`` /
+``checkpoint_every``.
 
 The scene modules (:mod:`granflow.scenes.channel`, :mod:`granflow.scenes.cell`,
 :mod:`granflow.scenes.gas`) import from here and :mod:`granflow.scenes` imports them, so the
@@ -16,7 +17,7 @@ import pyarrow as pa
 
 from granflow import _core
 from granflow.errors import ParameterError
-from granflow.simulation import check_checkpoint_args
+from granflow.simulation import check_checkpoint_args, to_table
 
 SCENES: dict[str, type] = {}
 
@@ -43,6 +44,43 @@ def check_keys(section: str, given: Mapping[str, Any], allowed: Mapping[str, Any
             raise ParameterError(
                 f"invalid {section}.{k}: unknown key: allowed one of {sorted(allowed)}"
             )
+
+
+class SampleTables:
+    """A scene's sample tables: the Arrow batches its kernel samplers close (one per window,
+    or a series' rows since the last drain), collected by table name as they are drained
+    (the kernel then holds only its open windows)."""
+
+    def __init__(self) -> None:
+        self._parts: dict[str, list[pa.Table]] = {}
+
+    def drain(self, core: _core.Sim) -> None:
+        """Take the tables the kernel's samplers closed since the last drain."""
+        for batch in core.take_tables():
+            self._parts.setdefault(batch.name, []).append(to_table(batch))
+
+    def tables(self) -> dict[str, pa.Table]:
+        """Every table by name (the parts joined once, then kept joined)."""
+        out = {}
+        for name, parts in self._parts.items():
+            if len(parts) > 1:
+                parts[:] = [pa.concat_tables(parts, promote_options="permissive")
+                            .combine_chunks()]
+            if parts and parts[0].num_rows:
+                out[name] = parts[0]
+        return out
+
+    def load(self, tables: Mapping[str, pa.Table]) -> None:
+        """Start from tables written earlier (a resumed run), dropping any drained rows."""
+        self._parts = {k: [t] for k, t in tables.items()}
+
+    def last(self, table: str) -> dict[str, Any] | None:
+        """The newest row of ``table`` (None before the first), without joining the parts."""
+        parts = self._parts.get(table)
+        if not parts or not parts[-1].num_rows:
+            return None
+        t = parts[-1]
+        return t.slice(t.num_rows - 1).to_pylist()[0]
 
 
 @runtime_checkable

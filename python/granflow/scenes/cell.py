@@ -11,7 +11,8 @@ Cell mass W_g = N kn a^2 / omega_g^2. 002 prints omega_g = 2.2 sqrt(m/kn), which
 read it as omega_g = 2.2 sqrt(kn/m) (a frequency of the order of the contact frequency), the
 default ``omega_g_factor = 2.2``; the stress fluctuations it gives are reported by the run.
 
-Observables per sample (docs/columns.md, cell series) follow 002's sign conventions: the stress
+Observables per sample (docs/columns.md, cell series; computed in the kernel's step loop,
+src/sampling/cell_obs.rs) follow 002's sign conventions: the stress
 is compressive-positive (2.11) and so is the strain rate, D = -sym(L), W = -skew(L) (002: a
 positive eigenvalue sum is compaction); the L_ab columns stay kinematic (2.16). With these,
 (4.1)–(5.4) hold as printed: mu1 > 0, mu2 = -N0/p, N1/tau = 4 mu3/mu1.
@@ -32,7 +33,7 @@ from granflow.errors import InstabilityError, ParameterError
 from granflow.simulation import run_chunked
 from granflow.sizes import uniform
 
-from ._base import check_keys, register, run_with_checkpoints
+from ._base import SampleTables, check_keys, register, run_with_checkpoints
 
 AX = "xyz"
 
@@ -91,6 +92,9 @@ class ShearCell:
             raise ParameterError(f"invalid mu_s = {self.mu_s}: allowed >= 0")
         if not (0 < self.phi0 <= 0.3):
             raise ParameterError(f"invalid phi0 = {self.phi0}: allowed 0 < phi0 <= 0.3")
+        if not (isinstance(self.sample_every, int) and self.sample_every >= 1):
+            raise ParameterError(
+                f"invalid sample_every = {self.sample_every!r}: allowed an integer >= 1")
         if not (0 < self.dt_frac <= 0.1):
             raise ParameterError(f"invalid dt_frac = {self.dt_frac}: allowed 0 < dt_frac <= 0.1")
         dist = uniform(self.d_min, self.d_max)
@@ -115,7 +119,9 @@ class ShearCell:
         self._d = d
         self._vs = vs
         self._h0 = np.asarray(self.sim.cell()[0])
-        self._rows: list[dict[str, float]] = []
+        self._tables = SampleTables()
+        # observables inside the kernel's step loop (src/sampling/cell_obs.rs, docs/columns.md)
+        self.sim.add_sampler("cell_series", int(self.sample_every))
         self.phi_max = vs / length**3  # densest state seen at the run's chunk boundaries
         self.pbc = (True, True, True)
         self.wall_seconds = 0.0
@@ -139,99 +145,6 @@ class ShearCell:
         out.update(t_c=self.t_c, a=self.a)
         return out
 
-    # -- observables ---------------------------------------------------------------------------
-    def observe(self) -> dict[str, float]:
-        """All cell observables of the current state (docs/columns.md)."""
-        core = self.sim
-        h = np.asarray(core.cell()[0])
-        obs = dict(core.domain_observables())
-        L = np.array([[obs[f"L_{a}{b}"] for b in AX] for a in AX])
-        sc = np.array([[obs[f"sigma_c_{a}{b}"] for b in AX] for a in AX])
-        sk = np.array([[obs[f"sigma_k_{a}{b}"] for b in AX] for a in AX])
-        sig = sc + sk
-        V = float(np.linalg.det(h))
-        F = h @ np.linalg.inv(self._h0)
-        # 002's convention: strain rate compressive-positive (D = -sym L, W = -skew L), with the
-        # compressive-positive stress; (4.1)-(5.4) then hold as printed (mu1 > 0, mu2 = -N0/p)
-        D = -0.5 * (L + L.T)
-        W = -0.5 * (L - L.T)
-        gd = float(np.sqrt(0.5 * np.sum(D * D)))
-        p = float(np.trace(sig) / 3)
-        sp = 0.5 * (sig + sig.T)
-        ev, evec = np.linalg.eigh(D)
-        order = np.argsort(ev)[::-1]
-        ev, evec = ev[order], evec[:, order]
-        d1h, d3h = evec[:, 0], evec[:, 2]
-        G = np.outer(d3h, d1h) - np.outer(d1h, d3h)
-        tiny = 1e-300
-        beta = abs(float(np.sum(W * G)) / (gd * float(np.sum(G * G)))) if gd > tiny else 0.0
-        sD = float(np.sum(sp * D))
-        D2 = D @ D - np.trace(D @ D) / 3 * np.eye(3)
-        DW = D @ W - W @ D
-        ok = gd > tiny and p > tiny and abs(sD) > tiny
-        mu1 = sD / (2 * gd * p) if ok else 0.0
-        mu2 = 1.5 * float(np.sum(sp * D2)) / (gd * gd * p) if ok else 0.0
-        mu3 = float(np.sum(sp * DW)) / (8 * gd * gd * p) if ok else 0.0
-        n0 = -3 * float(np.sum(sp * D2)) / (gd * sD) if ok else 0.0
-        n1 = float(np.sum(sp * DW)) / (gd * sD) if ok else 0.0
-        I = gd * self.a / np.sqrt(p / self.density) if p > tiny else 0.0  # noqa: E741
-        # fabric (5.1): <n n> = I/3 + (2/15) A over contacts
-        ids, dvec, _ = core.contacts()
-        nc = len(ids)
-        A = np.zeros((3, 3))
-        z2 = 0.0
-        theta = 0.0
-        if nc:
-            n = dvec / np.linalg.norm(dvec, axis=1)[:, None]
-            A = fabric(n)
-            z = np.bincount(ids.ravel(), minlength=core.n)
-            keep = np.ones(core.n, bool)
-            act = np.ones(nc, bool)
-            while True:  # remove rattlers (< 2 contacts) iteratively
-                bad = keep & (z < 2)
-                if not bad.any():
-                    break
-                keep &= ~bad
-                act &= keep[ids[:, 0]] & keep[ids[:, 1]]
-                z = np.bincount(ids[act].ravel(), minlength=core.n)
-            z2 = 2 * act.sum() / keep.sum() if keep.sum() else 0.0
-            # misalignment in the flow plane: compressive directions of D and of A (xy)
-            def angle(m: np.ndarray, largest: bool) -> float:
-                w, v = np.linalg.eigh(m[:2, :2])
-                e = v[:, -1] if largest else v[:, 0]
-                return float(np.degrees(np.arctan2(e[1], e[0])) % 180.0)
-
-            if gd > tiny:
-                diff = angle(A, True) - angle(D, True)
-                theta = float((diff + 90.0) % 180.0 - 90.0)
-        row: dict[str, float] = {"step": core.step, "t": core.time}
-        for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
-            row[f"H_{AX[a]}{AX[b]}"] = h[a, b]
-        for a in range(3):
-            for b in range(3):
-                row[f"F_{AX[a]}{AX[b]}"] = F[a, b]
-        for a in range(3):
-            for b in range(3):
-                row[f"L_{AX[a]}{AX[b]}"] = L[a, b]
-        for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
-            row[f"D_{AX[a]}{AX[b]}"] = D[a, b]
-        row.update(W_xy=W[0, 1], W_xz=W[0, 2], W_yz=W[1, 2], shear_rate=gd,
-                   d1=ev[0], d2=ev[1], d3=ev[2], beta=beta, phi=self._vs / V, p=p)
-        for name, m in (("sigma", sig), ("sigma_c", sc), ("sigma_k", sk)):
-            for a in range(3):
-                for b in range(3):
-                    row[f"{name}_{AX[a]}{AX[b]}"] = m[a, b]
-        row.update(mu1=mu1, mu2=mu2, mu3=mu3, I=I, N0_tau=n0, N1_tau=n1)
-        for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
-            row[f"A_{AX[a]}{AX[b]}"] = A[a, b]
-        dg = core.diagnostics()
-        row.update(Z2=z2, theta_c=theta, n_contacts=float(nc), max_overlap=dg["max_overlap"],
-                   tilt_flips=obs["tilt_flips"])
-        for k, v in row.items():
-            if not np.isfinite(v):
-                raise FloatingPointError(f"non-finite cell observable {k}")
-        return row
-
     # -- protocol ----------------------------------------------------------------------------
     def run(self, steps: int, progress: bool | None = None,
             checkpoint: str | os.PathLike[str] | None = None,
@@ -239,18 +152,15 @@ class ShearCell:
         """Advance ``steps`` steps, sampling every ``sample_every`` steps; ``checkpoint`` and
         ``checkpoint_every`` as :class:`granflow.scenes.Scene` says."""
 
+        def after_chunk() -> None:
+            self._tables.drain(self.sim)
+            self.phi_max = max(self.phi_max, self._vs / float(self.sim.volume))
+
         def advance(steps: int) -> None:
-            target = self.sim.step + int(steps)
-            while self.sim.step < target:
-                c = min(self.sample_every - self.sim.step % self.sample_every,
-                        target - self.sim.step)
-                try:
-                    run_chunked(self.sim, c, progress, self)
-                except InstabilityError as exc:
-                    raise InstabilityError(f"{exc}; {self.state_context()}") from exc
-                self.phi_max = max(self.phi_max, self._vs / float(self.sim.volume))
-                if self.sim.step % self.sample_every == 0:
-                    self._rows.append(self.observe())
+            try:
+                run_chunked(self.sim, steps, progress, self, after_chunk=after_chunk)
+            except InstabilityError as exc:
+                raise InstabilityError(f"{exc}; {self.state_context()}") from exc
 
         run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
@@ -274,11 +184,11 @@ class ShearCell:
         return msg
 
     def tables(self) -> dict[str, pa.Table]:
-        return {"series": pa.Table.from_pylist(self._rows)} if self._rows else {}
+        self._tables.drain(self.sim)
+        return self._tables.tables()
 
     def load_tables(self, tables: Mapping[str, pa.Table]) -> None:
-        if "series" in tables:
-            self._rows = tables["series"].to_pylist()
+        self._tables.load(tables)
 
     def summary(self) -> dict[str, Any]:
         from granflow.analysis import rheology as rh
@@ -303,6 +213,8 @@ class ShearCell:
         return out
 
     def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
+        # closed rows go to the tables first: the checkpoint carries the sampler's state
+        self._tables.drain(self.sim)
         self.sim.save_checkpoint(os.fspath(path), "{}")
 
     def restore(self, path: str | os.PathLike[str]) -> None:

@@ -18,22 +18,14 @@ with period H. Protocol details that the paper leaves open, and our choices:
   affinely into [0, H) and relaxed without gravity before the release;
 * the achieved phi_bar is exact: (total particle volume) / (W H B) with whole particles.
 
-Statistics (000 eqs 2.1–2.5), sampled every ``sample_every`` steps and averaged over windows of
-``window`` samples; each window is one row per bin of the ``bins`` table (docs/columns.md):
-
-* bins across x: the two wall bins are ``wall_bin`` wide, the interior is tiled by
-  ``n = round((W - 2 wall_bin)/bin_width)`` equal bins (width adjusted to tile exactly);
-* particle quantities (count, velocity, spin, temperature, kinetic stress, power) go to the bin
-  holding the particle's centre, as the paper does;
-* the contact stress (2.4) shares each contact's r_ij (x) f_ij among the bins its branch vector
-  crosses in proportion to the length inside each (the paper assigns half to each particle's
-  bin; the length rule makes each bin's stress divergence balance its forces, which the
-  centre rule does not at the scale of one bin); a wall contact's r (x) f, with r from the
-  contact point to the centre, lies in the wall bin, so wall contacts count where they act;
-* the volume fraction uses the exact sphere–slab intersection volumes (not centres);
-* the temperature (2.3) and the kinetic stress use fluctuations about the window's bin means;
-* Gamma (2.5) is -(1/V) sum_i P_i averaged over the samples, P_i = sum_j f_ij . v_ij / 2 (each
-  contact's power split between its two particles; walls in full).
+Statistics (000 eqs 2.1–2.5) are taken inside the kernel's step loop (``granflow._core``
+samplers ``channel_bins`` and ``channel_series``, src/sampling/channel.rs): every
+``sample_every`` steps, averaged over windows of ``window`` samples; each window is one row per
+bin of the ``bins`` table and each sample one row of the ``series`` table (docs/columns.md).
+The bins across x: the two wall bins are ``wall_bin`` wide, the interior is tiled by
+``n = round((W - 2 wall_bin)/bin_width)`` equal bins (width adjusted to tile exactly). How each
+quantity is binned (centres, exact sphere–slab volumes, contact stress along branch vectors,
+fluctuations about the window's bin means) is said in src/sampling/channel.rs.
 """
 
 from __future__ import annotations
@@ -49,24 +41,16 @@ import pyarrow as pa
 
 from granflow import _core
 from granflow.errors import ConfigurationError, ParameterError
-from granflow.simulation import Box, ContactLaw, Simulation, Wall, contact_time
+from granflow.simulation import Box, ContactLaw, Simulation, Wall, contact_time, run_chunked
 from granflow.sizes import SizeDist, discrete
 
-from ._base import check_keys, register, run_with_checkpoints
+from ._base import SampleTables, check_keys, register, run_with_checkpoints
 
 RCP = 0.64
-SIGMA = ["xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz"]
 
 
 def _law(kn: float, e_n: float, mu: float, kt: float | None, ratio: float, form: str) -> ContactLaw:
     return ContactLaw(kn=kn, e_n=e_n, mu=mu, kt=kt, xi_t_ratio=ratio, form=form)
-
-
-def cap_volume_below(z: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Volume of a sphere of radius r lying below a plane at signed height z above its centre."""
-    zc = np.clip(z, -r, r)
-    a = r + zc  # cap height
-    return np.pi * a * a * (3 * r - a) / 3.0
 
 
 @register("channel")
@@ -106,10 +90,7 @@ class Channel:
         self._validate()
         self.sim: Simulation | None = None
         self.prep_info: dict[str, Any] = {}
-        self._bins: list[pa.Table] = []
-        self._series: list[dict[str, float]] = []
-        self._win: dict[str, Any] | None = None
-        self._window_index = 0
+        self._tables = SampleTables()
         self.pbc = (False, True, True)
 
     # -- parameters ------------------------------------------------------------------------
@@ -265,7 +246,7 @@ class Channel:
             threads=self.threads,
         )
         self.prep_info = dict(prep_info)
-        self._cache_static()
+        self._add_samplers(self.sim.core)
 
     def prepare_from(self, other: Channel) -> None:
         """Start from the prepared (released, at rest) packing of ``other`` instead of pouring
@@ -286,13 +267,11 @@ class Channel:
         self._release(np.array(core.positions()), np.array(core.diameters()),
                       {**other.prep_info, "prepared_with_kn": other.kn})
 
-    def _cache_static(self) -> None:
-        core = self.core
-        self._d = core.diameters()
-        self._m = core.masses()
-        self._inertia = self._m * self._d**2 / 10
-        self._edges = self.bin_edges()
-        self._vbin = np.diff(self._edges) * self.H * self.B
+    def _add_samplers(self, core: _core.Sim) -> None:
+        """The kernel's samplers of this scene (docs/columns.md): bins and series."""
+        core.add_sampler("channel_bins", self.sample_every, window=self.window,
+                         edges=[float(e) for e in self.bin_edges()])
+        core.add_sampler("channel_series", self.sample_every)
 
     def _simulation(self) -> Simulation:
         if self.sim is None:
@@ -312,152 +291,6 @@ class Channel:
         self.prepare()
         return float(self.prep_info["phi_bar_achieved"])
 
-    # -- sampling ----------------------------------------------------------------------------
-    def _sample(self) -> None:
-        core = self.core
-        x, v, w = core.positions(), core.velocities(), core.angular_velocities()
-        s_c, power = core.particle_stats()
-        m, inertia, r = self._m, self._inertia, self._d / 2
-        edges = self._edges
-        nb = len(edges) - 1
-        b = np.clip(np.searchsorted(edges, x[:, 0], side="right") - 1, 0, nb - 1)
-
-        def bsum(vals: np.ndarray) -> np.ndarray:
-            if vals.ndim == 1:
-                return np.bincount(b, weights=vals, minlength=nb)
-            return np.stack([np.bincount(b, weights=vals[:, k], minlength=nb)
-                             for k in range(vals.shape[1])], axis=1)
-
-        below = cap_volume_below(edges[None, :] - x[:, :1], r[:, None])
-        vol = (below[:, 1:] - below[:, :-1]).sum(axis=0)
-        mv = m[:, None] * v
-        vv = (mv[:, :, None] * v[:, None, :]).reshape(-1, 9)
-        sc_bins = self._contact_stress_bins(core, x, s_c, edges)
-        acc = {
-            "count": np.bincount(b, minlength=nb).astype(float),
-            "vol": vol,
-            "m": bsum(m),
-            "mv": bsum(mv),
-            "mvv": bsum(vv),
-            "I": bsum(inertia),
-            "Iw": bsum(inertia[:, None] * w),
-            "Iww": bsum(inertia * np.einsum("ij,ij->i", w, w)),
-            "sc": sc_bins,
-            "P": bsum(power),
-        }
-        if self._win is None:
-            self._win = {"t0": core.time, "n": 0, **{k: np.zeros_like(a) for k, a in acc.items()}}
-        win = self._win
-        for k, a in acc.items():
-            win[k] += a
-        win["n"] += 1
-        # time series
-        mt = float(m.sum())
-        e = core.energies()
-        wf = np.asarray(core.wall_forces())
-        wi = np.asarray(core.wall_impulse())
-        area = self.H * self.B
-        dg = core.diagnostics()
-        mv_tot = (m[:, None] * v).sum(axis=0)
-        vcm = mv_tot / mt
-        self._series.append({
-            "step": core.step, "t": core.time, "vcm_x": vcm[0], "vcm_y": vcm[1], "vcm_z": vcm[2],
-            "ke_trans": e[0], "ke_rot": e[1],
-            "wall0_sigma_xx": wf[0, 0] / area, "wall0_sigma_xy": wf[0, 1] / area,
-            "wall0_sigma_xz": wf[0, 2] / area, "wall1_sigma_xx": wf[1, 0] / area,
-            "wall1_sigma_xy": wf[1, 1] / area, "wall1_sigma_xz": wf[1, 2] / area,
-            "n_contacts": float(dg["contacts"]), "max_overlap": dg["max_overlap"],
-            "px": float(mv_tot[0]), "py": float(mv_tot[1]), "pz": float(mv_tot[2]),
-            "wall_impulse_x": float(wi[:, 0].sum()), "wall_impulse_y": float(wi[:, 1].sum()),
-            "wall_impulse_z": float(wi[:, 2].sum()),
-        })
-        if win["n"] >= self.window:
-            self._win = None
-            self._close_window(win, core.time)
-
-    @staticmethod
-    def _contact_stress_bins(core: Any, x: np.ndarray, s_c: np.ndarray,
-                             edges: np.ndarray) -> np.ndarray:
-        """Contact stress sums per bin: each pair contact's r_ij (x) f_ij is shared among the
-        bins its branch vector crosses, in proportion to the length inside each (so the bins'
-        stress divergence balances their forces exactly, as in the method of planes); wall
-        contacts (branch vector inside the wall bin) go to the particle's bin."""
-        nb = len(edges) - 1
-        ids, d, f = core.contacts()
-        full = (d[:, :, None] * f[:, None, :]).reshape(-1, 9)
-        n = len(x)
-        pair_share = np.zeros((n, 9))
-        for col in (0, 1):
-            for k in range(9):
-                pair_share[:, k] += np.bincount(ids[:, col], weights=0.5 * full[:, k],
-                                                minlength=n)
-        wall_part = s_c - pair_share
-        b = np.clip(np.searchsorted(edges, x[:, 0], side="right") - 1, 0, nb - 1)
-        out = np.stack([np.bincount(b, weights=wall_part[:, k], minlength=nb)
-                        for k in range(9)], axis=1)
-        xi = x[ids[:, 0], 0]
-        xj = xi - d[:, 0]
-        lo, hi = np.minimum(xi, xj), np.maximum(xi, xj)
-        span = hi - lo
-        k0 = np.clip(np.searchsorted(edges, lo, side="right") - 1, 0, nb - 1)
-        k1 = np.clip(np.searchsorted(edges, hi, side="right") - 1, 0, nb - 1)
-        flat = span < 1e-12
-        for o in range(int((k1 - k0).max(initial=0)) + 1):
-            k = np.minimum(k0 + o, nb - 1)
-            ov = np.minimum(hi, edges[k + 1]) - np.maximum(lo, edges[k])
-            w = np.where(flat, (o == 0) * 1.0, np.clip(ov, 0, None) / np.where(flat, 1, span))
-            w = np.where(k0 + o <= k1, w, 0.0)
-            for c in range(9):
-                out[:, c] += np.bincount(k, weights=w * full[:, c], minlength=nb)
-        return out
-
-    def _close_window(self, a: dict[str, Any], t1: float) -> None:
-        """Append the bins rows of the window of sums ``a`` closed at time ``t1``."""
-        ns = a["n"]
-        edges = self._edges
-        nb = len(edges) - 1
-        vb = self._vbin * ns
-        msum = a["m"]
-        safe = np.where(msum > 0, msum, 1.0)
-        u = a["mv"] / safe[:, None]
-        isafe = np.where(a["I"] > 0, a["I"], 1.0)
-        om = a["Iw"] / isafe[:, None]
-        cnt = a["count"]
-        fluct_t = a["mvv"][:, [0, 4, 8]].sum(axis=1) - np.einsum("bk,bk->b", a["mv"], u)
-        fluct_r = a["Iww"] - np.einsum("bk,bk->b", a["Iw"], om)
-        T = np.where(cnt > 0, (fluct_t + fluct_r) / (6 * np.where(cnt > 0, cnt, 1)), 0.0)
-        sk = (a["mvv"] - (a["mv"][:, :, None] * u[:, None, :]).reshape(nb, 9)) / vb[:, None]
-        sc = a["sc"] / vb[:, None]
-        st = sk + sc
-        xc = 0.5 * (edges[1:] + edges[:-1])
-        uy = np.where(msum > 0, u[:, 1], 0.0)
-        dudx = np.gradient(uy, xc) if nb > 1 else np.zeros(nb)
-        cols: dict[str, Any] = {
-            "window": np.full(nb, self._window_index, dtype=np.int64),
-            "t0": np.full(nb, a["t0"]), "t1": np.full(nb, t1),
-            "n_samples": np.full(nb, ns, dtype=np.int64),
-            "bin": np.arange(nb, dtype=np.int64),
-            "x_lo": edges[:-1], "x_hi": edges[1:], "x": xc,
-            "count": cnt / ns, "phi": a["vol"] / vb,
-            "u_x": u[:, 0], "u_y": u[:, 1], "u_z": u[:, 2],
-            "w_x": om[:, 0], "w_y": om[:, 1], "w_z": om[:, 2], "T": T,
-        }
-        for k, c in enumerate(SIGMA):
-            cols[f"sigma_{c}"] = st[:, k]
-        for k, c in enumerate(SIGMA):
-            cols[f"sigma_c_{c}"] = sc[:, k]
-        for k, c in enumerate(SIGMA):
-            cols[f"sigma_k_{c}"] = sk[:, k]
-        cols["Gamma"] = -a["P"] / vb
-        cols["shear_production"] = st[:, 1] * dudx
-        tab = pa.table(cols)
-        for name in tab.column_names:
-            col = tab[name].to_numpy()
-            if col.dtype.kind == "f" and not np.isfinite(col).all():
-                raise FloatingPointError(f"non-finite value in bins column {name}")
-        self._bins.append(tab)
-        self._window_index += 1
-
     # -- protocol ----------------------------------------------------------------------------
     def run(self, steps: int, progress: bool | None = None,
             checkpoint: str | os.PathLike[str] | None = None,
@@ -466,39 +299,21 @@ class Channel:
         ``sample_every`` steps; ``checkpoint`` and ``checkpoint_every`` as
         :class:`granflow.scenes.Scene` says."""
         self.prepare(progress=progress)
-        sim = self._simulation()
-        core = sim.core
+        core = self.core
 
         def advance(steps: int) -> None:
-            target = core.step + int(steps)
-            while core.step < target:
-                to_sample = self.sample_every - core.step % self.sample_every
-                c = min(to_sample, target - core.step)
-                if c > 1:
-                    sim.run(c - 1, progress=progress)
-                if core.step % self.sample_every == self.sample_every - 1:
-                    core.request_stats()
-                    sim.run(1, progress=False)
-                    self._sample()
-                elif core.step < target:
-                    sim.run(1, progress=False)
+            run_chunked(core, steps, progress, self._simulation(),
+                        after_chunk=lambda: self._tables.drain(core))
 
         run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
     def tables(self) -> dict[str, pa.Table]:
-        out = {}
-        if self._bins:
-            out["bins"] = pa.concat_tables(self._bins)
-        if self._series:
-            out["series"] = pa.Table.from_pylist(self._series)
-        return out
+        if self.sim is not None:
+            self._tables.drain(self.core)
+        return self._tables.tables()
 
     def load_tables(self, tables: Mapping[str, pa.Table]) -> None:
-        if "bins" in tables:
-            self._bins = [tables["bins"]]
-            self._window_index = int(tables["bins"]["window"].to_numpy().max()) + 1
-        if "series" in tables:
-            self._series = tables["series"].to_pylist()
+        self._tables.load(tables)
 
     def summary(self) -> dict[str, Any]:
         """The paper's analysis (granflow.analysis.channel.summary) flattened to scalars."""
@@ -530,6 +345,8 @@ class Channel:
         from granflow.io import atomic_path
 
         self.prepare()
+        # closed windows go to the tables first: the checkpoint carries the open ones
+        self._tables.drain(self.core)
         # the preparation record rides beside the kernel checkpoint (written first: a
         # checkpoint never exists without it)
         with atomic_path(f"{os.fspath(path)}.prep.json") as tmp:
@@ -537,10 +354,10 @@ class Channel:
         self._simulation().save_checkpoint(path)
 
     def restore(self, path: str | os.PathLike[str]) -> None:
-        self.sim = Simulation.from_checkpoint(path, threads=self.threads)
+        # (the samplers are added before the state is loaded: their open windows ride in it)
+        self.sim = Simulation.from_checkpoint(path, threads=self.threads,
+                                              configure=self._add_samplers)
         prep = f"{os.fspath(path)}.prep.json"
         if os.path.exists(prep):
             with open(prep) as f:
                 self.prep_info = json.load(f)
-        self._cache_static()
-        self._win = None

@@ -1,0 +1,697 @@
+//! The channel's samplers (000_260a8780d7c638a6 eqs 2.1–2.5; columns in docs/columns.md):
+//! `bins`, window averages in slabs across x between the walls, and `series`, one row per
+//! sample of whole-channel quantities.
+//!
+//! Bins: particle quantities (count, velocity, spin, temperature, kinetic stress, power) go to
+//! the bin holding the particle's centre; the volume fraction uses the exact sphere–slab
+//! intersection volumes; each pair contact's r_ij (x) f_ij is shared among the bins its branch
+//! vector crosses in proportion to the length inside each (000 assigns half to each particle's
+//! bin; the length rule makes each bin's stress divergence balance its forces), and a wall
+//! contact's lies in the bin of its particle. The temperature (2.3) and the kinetic stress use
+//! fluctuations about the window's bin means; Gamma (2.5) is -(1/V) sum_i P_i with each
+//! contact's power split half and half (walls in full).
+
+use super::{
+    check_finite, check_window, ContactRec, Rows, SampleView, Sampler, SamplerSpec, Setup, WALL,
+};
+use crate::error::{Error, Result};
+use crate::table::Table;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+const SIGMA: [&str; 9] = ["xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz"];
+
+/// Accumulator layout per bin: count, vol, m, mv (3), mvv (9), I, Iw (3), Iww, sc (9), P.
+const COUNT: usize = 0;
+const VOL: usize = 1;
+const M: usize = 2;
+const MV: usize = 3;
+const MVV: usize = 6;
+const IN: usize = 15;
+const IW: usize = 16;
+const IWW: usize = 19;
+const SC: usize = 20;
+const P: usize = 29;
+const NACC: usize = 30;
+
+/// Volume of a sphere of radius r lying below a plane at signed height z above its centre.
+fn cap_below(z: f64, r: f64) -> f64 {
+    let zc = z.clamp(-r, r);
+    let a = r + zc;
+    PI * a * a * (3.0 * r - a) / 3.0
+}
+
+/// The bin of coordinate x: numpy's `clip(searchsorted(edges, x, 'right') - 1, 0, nb - 1)`.
+#[cfg(test)]
+fn bin_of(edges: &[f64], x: f64) -> usize {
+    let nb = edges.len() - 1;
+    edges
+        .partition_point(|&e| e <= x)
+        .saturating_sub(1)
+        .min(nb - 1)
+}
+
+/// The bins' edges with a fast lookup: a guess from the interior's mean width, corrected
+/// against the edges themselves (so exactly `bin_of`'s answer, in a step or two).
+struct Lookup {
+    edges: Vec<f64>,
+    lo: f64,
+    inv_w: f64,
+}
+
+impl Lookup {
+    fn new(edges: &[f64]) -> Self {
+        let nb = edges.len() - 1;
+        // the interior between the first and last inner edges (wall bins may differ)
+        let (a, b) = if nb > 2 {
+            (edges[1], edges[nb - 1])
+        } else {
+            (edges[0], edges[nb])
+        };
+        let span = if nb > 2 { (nb - 2) as f64 } else { nb as f64 };
+        Lookup {
+            edges: edges.to_vec(),
+            lo: a,
+            inv_w: span / (b - a),
+        }
+    }
+
+    #[inline]
+    fn bin(&self, x: f64) -> usize {
+        let e = &self.edges;
+        let nb = e.len() - 1;
+        let g = (x - self.lo) * self.inv_w + if nb > 2 { 1.0 } else { 0.0 };
+        // (NaN and far-out values clamp to the end bins, as bin_of does)
+        let mut k = if g >= 0.0 {
+            (g as usize).min(nb - 1)
+        } else {
+            0
+        };
+        while k > 0 && x < e[k] {
+            k -= 1;
+        }
+        while k + 1 < nb && x >= e[k + 1] {
+            k += 1;
+        }
+        k
+    }
+
+    /// One chunk's sums: its particles `r` and its contacts `recs`.
+    fn sums(
+        &self,
+        v: &SampleView,
+        r: std::ops::Range<usize>,
+        recs: &[ContactRec],
+    ) -> Vec<[f64; NACC]> {
+        let p = v.p;
+        let edges = &self.edges;
+        let nb = edges.len() - 1;
+        let mut acc = vec![[0.0; NACC]; nb];
+        let mut below = [0.0f64; 8];
+        for i in r {
+            let x = p.x[i];
+            let rad = p.radius[i];
+            let m = p.mass[i];
+            let vi = [p.v[i].x, p.v[i].y, p.v[i].z];
+            let w = [p.omega[i].x, p.omega[i].y, p.omega[i].z];
+            let inertia = m * (2.0 * rad) * (2.0 * rad) / 10.0;
+            let b = self.bin(x.x);
+            let a = &mut acc[b];
+            a[COUNT] += 1.0;
+            a[M] += m;
+            for k in 0..3 {
+                a[MV + k] += m * vi[k];
+                a[IW + k] += inertia * w[k];
+            }
+            // the upper triangle (the lower one is filled in when the window closes)
+            for ka in 0..3 {
+                for kb in ka..3 {
+                    a[MVV + 3 * ka + kb] += m * vi[ka] * vi[kb];
+                }
+            }
+            a[IN] += inertia;
+            a[IWW] += inertia * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+            a[P] += v.pstats[i][9];
+            // the sphere's volume in each slab it reaches (the cap below each edge once; an
+            // edge beyond the sphere's reach gives exactly 0 or the whole sphere)
+            let (k0, k1) = (self.bin(x.x - rad), self.bin(x.x + rad));
+            if k1 - k0 + 2 <= below.len() {
+                let whole = cap_below(rad, rad);
+                for (q, k) in (k0..=k1 + 1).enumerate() {
+                    let z = edges[k] - x.x;
+                    below[q] = if z <= -rad {
+                        0.0
+                    } else if z >= rad {
+                        whole
+                    } else {
+                        cap_below(z, rad)
+                    };
+                }
+                for k in k0..=k1 {
+                    acc[k][VOL] += below[k - k0 + 1] - below[k - k0];
+                }
+            } else {
+                for (k, slab) in acc.iter_mut().enumerate().take(k1 + 1).skip(k0) {
+                    slab[VOL] +=
+                        cap_below(edges[k + 1] - x.x, rad) - cap_below(edges[k] - x.x, rad);
+                }
+            }
+        }
+        // contact stress: walls in their particle's bin, pairs along their branch vectors
+        for c in recs {
+            let d = [c.d.x, c.d.y, c.d.z];
+            let f = [c.f.x, c.f.y, c.f.z];
+            let full: [f64; 9] = std::array::from_fn(|k| d[k / 3] * f[k % 3]);
+            let xi = p.x[c.i as usize].x;
+            if c.j == WALL {
+                let a = &mut acc[self.bin(xi)];
+                for k in 0..9 {
+                    a[SC + k] += full[k];
+                }
+                continue;
+            }
+            let xj = xi - d[0];
+            let (lo, hi) = (xi.min(xj), xi.max(xj));
+            let span = hi - lo;
+            let (k0, k1) = (self.bin(lo), self.bin(hi));
+            if k0 == k1 || span < 1e-12 {
+                let a = &mut acc[k0];
+                for q in 0..9 {
+                    a[SC + q] += full[q];
+                }
+                continue;
+            }
+            for k in k0..=k1 {
+                let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
+                let share = ov.max(0.0) / span;
+                let a = &mut acc[k];
+                for q in 0..9 {
+                    a[SC + q] += share * full[q];
+                }
+            }
+        }
+        acc
+    }
+}
+
+/// numpy.gradient (second order inside, first order at the ends) of y over points x.
+fn gradient(y: &[f64], x: &[f64]) -> Vec<f64> {
+    let n = y.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    let mut g = vec![0.0; n];
+    g[0] = (y[1] - y[0]) / (x[1] - x[0]);
+    g[n - 1] = (y[n - 1] - y[n - 2]) / (x[n - 1] - x[n - 2]);
+    for i in 1..n - 1 {
+        let hs = x[i] - x[i - 1];
+        let hd = x[i + 1] - x[i];
+        g[i] = (hs * hs * y[i + 1] + (hd * hd - hs * hs) * y[i] - hd * hd * y[i - 1])
+            / (hs * hd * (hd + hs));
+    }
+    g
+}
+
+/// The `bins` table's window sampler.
+pub struct Bins {
+    every: u64,
+    window: u64,
+    edges: Vec<f64>,
+    lookup: Lookup,
+    /// Bin volumes (width x H x B).
+    vbin: Vec<f64>,
+    /// The open window: its sums, samples, start time; and the next window's index.
+    acc: Vec<[f64; NACC]>,
+    n: u64,
+    t0: f64,
+    index: u64,
+    closed: Vec<Table>,
+}
+
+impl Bins {
+    pub fn new(spec: &SamplerSpec, setup: &Setup) -> Result<Self> {
+        check_window("channel_bins", spec.window)?;
+        let e = &spec.edges;
+        let w = setup.widths[0];
+        if e.len() < 2 || e.iter().any(|x| !x.is_finite()) || e.windows(2).any(|p| p[1] <= p[0]) {
+            return Err(Error::param(
+                "channel_bins.edges",
+                format!("{e:?}"),
+                "at least two finite, strictly increasing bin edges",
+            ));
+        }
+        if setup.periodic[0] || setup.walls < 2 {
+            return Err(Error::param(
+                "channel_bins",
+                "this simulation",
+                "a channel: walls across x (the bins are slabs between them)",
+            ));
+        }
+        if e[0] != 0.0 || e[e.len() - 1] != w {
+            return Err(Error::param(
+                "channel_bins.edges",
+                format!("[{}, ..., {}]", e[0], e[e.len() - 1]),
+                format!(
+                    "edges from the wall x = 0 to the wall x = W = {w} (bins tiling the channel)"
+                ),
+            ));
+        }
+        let area = setup.widths[1] * setup.widths[2];
+        let vbin = e.windows(2).map(|p| (p[1] - p[0]) * area).collect();
+        let nb = e.len() - 1;
+        Ok(Bins {
+            every: spec.every,
+            window: spec.window,
+            edges: e.clone(),
+            lookup: Lookup::new(e),
+            vbin,
+            acc: vec![[0.0; NACC]; nb],
+            n: 0,
+            t0: 0.0,
+            index: 0,
+            closed: Vec::new(),
+        })
+    }
+
+    /// The sums of one sample, added to the open window: each force-loop chunk's particles
+    /// and contacts summed apart (in parallel), then the chunks' sums added in chunk order, so
+    /// the bits do not depend on the thread count.
+    fn accumulate(&mut self, v: &SampleView) {
+        let n = v.p.len();
+        let nch = v.contacts.len().max(1);
+        let ch = n.div_ceil(nch);
+        let lookup = &self.lookup;
+        let parts: Vec<Vec<[f64; NACC]>> = (0..nch)
+            .into_par_iter()
+            .map(|c| {
+                let r = (c * ch).min(n)..((c + 1) * ch).min(n);
+                let recs = v.contacts.get(c).map_or(&[][..], |x| &x[..]);
+                lookup.sums(v, r, recs)
+            })
+            .collect();
+        for part in parts {
+            for (a, b) in self.acc.iter_mut().zip(&part) {
+                for (x, y) in a.iter_mut().zip(b) {
+                    *x += y;
+                }
+            }
+        }
+    }
+
+    /// The rows of the window closed at time `t1`.
+    fn close(&mut self, t1: f64) -> Table {
+        let ns = self.n as f64;
+        let nb = self.acc.len();
+        let edges = &self.edges;
+        let mut cols: Vec<(&str, Vec<f64>)> = Vec::new();
+        let a = &self.acc;
+        let vb: Vec<f64> = self.vbin.iter().map(|v| v * ns).collect();
+        let xc: Vec<f64> = edges.windows(2).map(|p| 0.5 * (p[1] + p[0])).collect();
+        let mut u = vec![[0.0; 3]; nb];
+        let mut om = vec![[0.0; 3]; nb];
+        let mut temp = vec![0.0; nb];
+        let mut sk = vec![[0.0; 9]; nb];
+        let mut sc = vec![[0.0; 9]; nb];
+        for b in 0..nb {
+            let mut s = a[b];
+            // the kinetic sums were kept on the upper triangle
+            s[MVV + 3] = s[MVV + 1];
+            s[MVV + 6] = s[MVV + 2];
+            s[MVV + 7] = s[MVV + 5];
+            let msafe = if s[M] > 0.0 { s[M] } else { 1.0 };
+            let isafe = if s[IN] > 0.0 { s[IN] } else { 1.0 };
+            for k in 0..3 {
+                u[b][k] = s[MV + k] / msafe;
+                om[b][k] = s[IW + k] / isafe;
+            }
+            let mvu: f64 = (0..3).map(|k| s[MV + k] * u[b][k]).sum();
+            let iwo: f64 = (0..3).map(|k| s[IW + k] * om[b][k]).sum();
+            let ft = s[MVV] + s[MVV + 4] + s[MVV + 8] - mvu;
+            let fr = s[IWW] - iwo;
+            let cnt = s[COUNT];
+            temp[b] = if cnt > 0.0 {
+                (ft + fr) / (6.0 * cnt)
+            } else {
+                0.0
+            };
+            for k in 0..9 {
+                sk[b][k] = (s[MVV + k] - s[MV + k / 3] * u[b][k % 3]) / vb[b];
+                sc[b][k] = s[SC + k] / vb[b];
+            }
+        }
+        let uy: Vec<f64> = (0..nb)
+            .map(|b| if a[b][M] > 0.0 { u[b][1] } else { 0.0 })
+            .collect();
+        let dudx = gradient(&uy, &xc);
+        let col = |f: &dyn Fn(usize) -> f64| (0..nb).map(f).collect::<Vec<f64>>();
+        let mut t = Table::new();
+        t.push_i64("window", "", vec![self.index as i64; nb]);
+        t.push_f64("t0", "sqrt(d/g)", vec![self.t0; nb]);
+        t.push_f64("t1", "sqrt(d/g)", vec![t1; nb]);
+        t.push_i64("n_samples", "", vec![self.n as i64; nb]);
+        t.push_i64("bin", "", (0..nb as i64).collect());
+        t.push_f64("x_lo", "d", edges[..nb].to_vec());
+        t.push_f64("x_hi", "d", edges[1..].to_vec());
+        t.push_f64("x", "d", xc.clone());
+        cols.push(("count", col(&|b| a[b][COUNT] / ns)));
+        cols.push(("phi", col(&|b| a[b][VOL] / vb[b])));
+        for (k, c) in ["u_x", "u_y", "u_z"].iter().enumerate() {
+            cols.push((c, col(&|b| u[b][k])));
+        }
+        for (k, c) in ["w_x", "w_y", "w_z"].iter().enumerate() {
+            cols.push((c, col(&|b| om[b][k])));
+        }
+        for (name, unit, data) in cols.drain(..).map(|(n, d)| {
+            let unit = match n {
+                "count" | "phi" => "",
+                "w_x" | "w_y" | "w_z" => "sqrt(g/d)",
+                _ => "sqrt(g d)",
+            };
+            (n, unit, d)
+        }) {
+            t.push_f64(name, unit, data);
+        }
+        t.push_f64("T", "g d", temp);
+        let stress = "rho_p g d";
+        for (k, c) in SIGMA.iter().enumerate() {
+            t.push_f64(&format!("sigma_{c}"), stress, col(&|b| sk[b][k] + sc[b][k]));
+        }
+        for (k, c) in SIGMA.iter().enumerate() {
+            t.push_f64(&format!("sigma_c_{c}"), stress, col(&|b| sc[b][k]));
+        }
+        for (k, c) in SIGMA.iter().enumerate() {
+            t.push_f64(&format!("sigma_k_{c}"), stress, col(&|b| sk[b][k]));
+        }
+        t.push_f64("Gamma", "rho_p g^1.5 d^0.5", col(&|b| -a[b][P] / vb[b]));
+        t.push_f64(
+            "shear_production",
+            "rho_p g^1.5 d^0.5",
+            col(&|b| (sk[b][1] + sc[b][1]) * dudx[b]),
+        );
+        t.metadata
+            .push(("granflow.sampler".into(), "channel_bins".into()));
+        t
+    }
+
+    pub fn column_names() -> Vec<&'static str> {
+        let mut c = vec![
+            "window",
+            "t0",
+            "t1",
+            "n_samples",
+            "bin",
+            "x_lo",
+            "x_hi",
+            "x",
+            "count",
+            "phi",
+            "u_x",
+            "u_y",
+            "u_z",
+            "w_x",
+            "w_y",
+            "w_z",
+            "T",
+        ];
+        for pre in ["sigma_", "sigma_c_", "sigma_k_"] {
+            for s in SIGMA {
+                c.push(leak(format!("{pre}{s}")));
+            }
+        }
+        c.push("Gamma");
+        c.push("shear_production");
+        c
+    }
+}
+
+/// Column names built at run time live as long as the program (a few dozen, once).
+fn leak(s: String) -> &'static str {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static NAMES: OnceLock<Mutex<HashMap<String, &'static str>>> = OnceLock::new();
+    let mut m = NAMES.get_or_init(Default::default).lock().unwrap();
+    if let Some(s) = m.get(&s) {
+        return s;
+    }
+    let l: &'static str = Box::leak(s.clone().into_boxed_str());
+    m.insert(s, l);
+    l
+}
+
+impl Sampler for Bins {
+    fn kind(&self) -> &'static str {
+        "channel_bins"
+    }
+    fn table(&self) -> &'static str {
+        "bins"
+    }
+    fn every(&self) -> u64 {
+        self.every
+    }
+    fn columns(&self) -> Vec<&'static str> {
+        Self::column_names()
+    }
+    fn sample(&mut self, v: &SampleView) -> Result<()> {
+        if self.n == 0 {
+            self.t0 = v.time;
+        }
+        self.accumulate(v);
+        self.n += 1;
+        if self.n >= self.window {
+            let t = self.close(v.time);
+            check_finite("channel bins", v.step, &t)?;
+            self.closed.push(t);
+            self.index += 1;
+            self.n = 0;
+            self.acc.iter_mut().for_each(|a| *a = [0.0; NACC]);
+        }
+        Ok(())
+    }
+    fn take(&mut self) -> Vec<Table> {
+        std::mem::take(&mut self.closed)
+    }
+    fn save(&self) -> Vec<f64> {
+        let mut s = vec![self.n as f64, self.t0, self.index as f64];
+        s.extend(self.acc.iter().flatten());
+        s
+    }
+    fn load(&mut self, s: &[f64]) -> Result<()> {
+        if s.len() != 3 + NACC * self.acc.len() {
+            return Err(Error::Io {
+                message: "checkpoint: the channel bins' open window has another number of bins \
+                          than this sampler"
+                    .into(),
+            });
+        }
+        self.n = s[0] as u64;
+        self.t0 = s[1];
+        self.index = s[2] as u64;
+        for (a, c) in self.acc.iter_mut().zip(s[3..].chunks_exact(NACC)) {
+            a.copy_from_slice(c);
+        }
+        Ok(())
+    }
+    fn bytes(&self) -> usize {
+        8 * NACC * self.acc.len() + self.closed.iter().map(super::table_bytes).sum::<usize>()
+    }
+}
+
+/// The `series` sampler: one row per sample.
+pub struct Series {
+    every: u64,
+    /// H B: the walls' area.
+    area: f64,
+    rows: Rows,
+}
+
+const SERIES: [&str; 21] = [
+    "step",
+    "t",
+    "vcm_x",
+    "vcm_y",
+    "vcm_z",
+    "ke_trans",
+    "ke_rot",
+    "wall0_sigma_xx",
+    "wall0_sigma_xy",
+    "wall0_sigma_xz",
+    "wall1_sigma_xx",
+    "wall1_sigma_xy",
+    "wall1_sigma_xz",
+    "n_contacts",
+    "max_overlap",
+    "px",
+    "py",
+    "pz",
+    "wall_impulse_x",
+    "wall_impulse_y",
+    "wall_impulse_z",
+];
+
+fn series_names() -> Vec<&'static str> {
+    SERIES.to_vec()
+}
+
+fn series_unit(name: &str) -> &'static str {
+    match name {
+        "step" | "n_contacts" | "max_overlap" => "",
+        "t" => "sqrt(d/g)",
+        "ke_trans" | "ke_rot" => "rho_p g d^4",
+        "px" | "py" | "pz" => "rho_p d^3 sqrt(g d)",
+        n if n.starts_with("wall_impulse") => "rho_p d^3 sqrt(g d)",
+        n if n.starts_with("wall") => "rho_p g d",
+        _ => "sqrt(g d)",
+    }
+}
+
+impl Series {
+    pub fn new(spec: &SamplerSpec, setup: &Setup) -> Result<Self> {
+        if setup.walls < 2 {
+            return Err(Error::param(
+                "channel_series",
+                "this simulation",
+                "a channel with its two walls",
+            ));
+        }
+        let names = series_names();
+        let units = names.iter().map(|n| series_unit(n)).collect();
+        Ok(Series {
+            every: spec.every,
+            area: setup.widths[1] * setup.widths[2],
+            rows: Rows::new(names, units, &["step"]),
+        })
+    }
+}
+
+impl Sampler for Series {
+    fn kind(&self) -> &'static str {
+        "channel_series"
+    }
+    fn table(&self) -> &'static str {
+        "series"
+    }
+    fn every(&self) -> u64 {
+        self.every
+    }
+    fn columns(&self) -> Vec<&'static str> {
+        series_names()
+    }
+    fn sample(&mut self, v: &SampleView) -> Result<()> {
+        let p = v.p;
+        let mut mt = 0.0;
+        let mut mv = crate::V3::zeros();
+        for i in 0..p.len() {
+            mt += p.mass[i];
+            mv += p.mass[i] * p.v[i];
+        }
+        let vcm = mv / mt;
+        let (ket, ker) = p.kinetic_energy();
+        let wf = v.wall_force;
+        let imp = v.wall_impulse[0] + v.wall_impulse[1];
+        let a = self.area;
+        let row = [
+            v.step as f64,
+            v.time,
+            vcm.x,
+            vcm.y,
+            vcm.z,
+            ket,
+            ker,
+            wf[0].x / a,
+            wf[0].y / a,
+            wf[0].z / a,
+            wf[1].x / a,
+            wf[1].y / a,
+            wf[1].z / a,
+            v.n_contacts as f64,
+            v.max_overlap,
+            mv.x,
+            mv.y,
+            mv.z,
+            imp.x,
+            imp.y,
+            imp.z,
+        ];
+        if let Some(k) = row.iter().position(|x| !x.is_finite()) {
+            let mut t = Table::new();
+            t.push_f64(self.rows.names[k], "", vec![row[k]]);
+            check_finite("channel series", v.step, &t)?;
+        }
+        self.rows.push(&row);
+        Ok(())
+    }
+    fn take(&mut self) -> Vec<Table> {
+        if self.rows.len() == 0 {
+            return Vec::new();
+        }
+        let mut t = self.rows.drain();
+        t.metadata
+            .push(("granflow.sampler".into(), "channel_series".into()));
+        vec![t]
+    }
+    fn save(&self) -> Vec<f64> {
+        self.rows.flat()
+    }
+    fn load(&mut self, s: &[f64]) -> Result<()> {
+        if s.is_empty() {
+            for c in &mut self.rows.data {
+                c.clear();
+            }
+            return Ok(());
+        }
+        self.rows.set_flat(s)
+    }
+    fn bytes(&self) -> usize {
+        self.rows.bytes()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_lookup_is_searchsorted() {
+        let mut edges = vec![0.0, 1.5];
+        edges.extend((1..18).map(|k| 1.5 + k as f64 * (17.0 / 17.0)));
+        edges.push(20.0);
+        let odd = [0.0, 0.7, 3.1, 3.2, 9.0];
+        for e in [&edges[..], &odd[..], &[0.0, 5.0][..], &[0.0, 2.0, 5.0][..]] {
+            let l = Lookup::new(e);
+            let top = e[e.len() - 1];
+            for k in -100..2200 {
+                let x = k as f64 * top / 2000.0;
+                assert_eq!(l.bin(x), bin_of(e, x), "x = {x}, edges {e:?}");
+            }
+            for &x in e {
+                assert_eq!(l.bin(x), bin_of(e, x));
+                assert_eq!(l.bin(x - 1e-15), bin_of(e, x - 1e-15));
+            }
+            assert_eq!(l.bin(f64::NAN), bin_of(e, f64::NAN));
+            assert_eq!(l.bin(f64::INFINITY), bin_of(e, f64::INFINITY));
+            assert_eq!(l.bin(-f64::INFINITY), bin_of(e, -f64::INFINITY));
+        }
+    }
+
+    #[test]
+    fn gradient_is_numpys() {
+        // numpy.gradient([1, 4, 9, 25], [0, 1, 2, 4]) = [3, 4, 6, 8]
+        let g = gradient(&[1.0, 4.0, 9.0, 25.0], &[0.0, 1.0, 2.0, 4.0]);
+        let want = [3.0, 4.0, 6.0, 8.0];
+        for (a, b) in g.iter().zip(want) {
+            assert!((a - b).abs() < 1e-12, "{g:?}");
+        }
+    }
+
+    #[test]
+    fn caps_sum_to_the_sphere() {
+        let r = 0.55;
+        let edges = [0.0, 1.5, 2.5, 3.5, 8.3];
+        let x = 2.4;
+        let v: f64 = edges
+            .windows(2)
+            .map(|e| cap_below(e[1] - x, r) - cap_below(e[0] - x, r))
+            .sum();
+        assert!((v - 4.0 / 3.0 * PI * r * r * r).abs() < 1e-14);
+    }
+}
