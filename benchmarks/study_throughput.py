@@ -15,7 +15,7 @@ comparable statistics on the same state:
   granflow: a fresh ``Channel(..., bin_width=1, wall_bin=1, sample_every=k, window=w)`` made from
   the state with ``Channel._release`` + ``set_velocities``/``set_angular_velocities``; timed
   ``scene.run(steps)`` followed by ``scene.tables()`` (the sampling and the Arrow tables a user
-  pays); "none" = ``scene.core.run(steps)`` (the bare kernel). The set-up force evaluation is
+  pays); "none" = the same with ``sample_every=None`` (no samplers: the bare kernel). The set-up force evaluation is
   outside the timing, as LAMMPS's Loop time excludes its setup.
   LAMMPS (``benchmarks/lammps_peer.py``, scene 'channel', the law of
   ``compare_lammps.lmp_params`` with kn = 1e5 and gamma_n from e_n at the mean pair's m_eff, the
@@ -28,7 +28,7 @@ comparable statistics on the same state:
 - cell: ``ShearCell(N=2000, seed=1, sample_every=k)`` brought to steady dense flow once
   (``--cell-dev-steps``, cached as a checkpoint), then, from that checkpoint each time,
   ``scene.run(steps)`` + ``scene.tables()`` with observables every 10 and every 250 steps against
-  ``scene.core.run(steps)``; granflow only.
+  ``sample_every=None``; granflow only.
 
 The configurations are timed in ``--rounds`` interleaved rounds (granflow and LAMMPS alternating,
 the order swapped every round: this VM's speed drifts over minutes); the tables give the best of
@@ -98,7 +98,7 @@ def _label(every: int | None) -> str:
 
 def make_channel(every: int | None, window: int, threads: int) -> Channel:
     return Channel(W=W, H=H, B=B, phi_bar=0.6, kn=KN, kt=KT, e_n=E_N, mu=MU, dt=DT, skin=SKIN,
-                   seed=SEED, bin_width=1.0, wall_bin=1.0, sample_every=every or 100,
+                   seed=SEED, bin_width=1.0, wall_bin=1.0, sample_every=every,
                    window=window, threads=threads)
 
 
@@ -144,14 +144,10 @@ def gf_channel_rate(st: State, every: int | None, window: int, steps: int, threa
     core = sc.core
     core.compute_forces()  # the set-up evaluation outside the timing (LAMMPS: setup)
     t0 = time.perf_counter()
-    if every is None:
-        core.run(steps)
-    else:
-        sc.run(steps, progress=False)
-        tabs = sc.tables()
+    sc.run(steps, progress=False)
+    tabs = sc.tables()
     rate = core.n * steps / (time.perf_counter() - t0)
-    if every is not None:
-        info[f"gf_{_label(every)}_rows"] = {k: t.num_rows for k, t in tabs.items()}
+    info[f"gf_{_label(every)}_rows"] = {k: t.num_rows for k, t in tabs.items()}
     return rate
 
 
@@ -325,20 +321,16 @@ def cell_checkpoint(dev_steps: int) -> Path:
 
 def gf_cell_rate(ckpt: Path, every: int | None, steps: int, threads: int,
                  info: dict[str, Any]) -> float:
-    c = ShearCell(N=CELL_N, seed=SEED, sample_every=every or 1000, threads=threads)
+    c = ShearCell(N=CELL_N, seed=SEED, sample_every=every, threads=threads)
     c.restore(ckpt)
     core = c.core
     core.run(1)  # pool and team set-up outside the timing (as compare_lammps's cell speed)
     t0 = time.perf_counter()
-    if every is None:
-        core.run(steps)
-    else:
-        c.run(steps, progress=False)
-        tabs = c.tables()
+    c.run(steps, progress=False)
+    tabs = c.tables()
     rate = core.n * steps / (time.perf_counter() - t0)
     info["phi"] = c._vs / float(core.volume)
-    if every is not None:
-        info[f"rows_{_label(every)}"] = {k: t.num_rows for k, t in tabs.items()}
+    info[f"rows_{_label(every)}"] = {k: t.num_rows for k, t in tabs.items()}
     return rate
 
 

@@ -611,23 +611,28 @@ fn law_and_sums<F, T, D, const STATS: bool, const VIR: bool, const AVX: bool>(
             if STATS {
                 let d = V3::new(p.d.x.0[l], p.d.y.0[l], p.d.z.0[l]);
                 let vrel = V3::new(r.vrel.x.0[l], r.vrel.y.0[l], r.vrel.z.0[l]);
-                let half = 0.5 * d * f.transpose();
-                let mut rec = [0.0; 10];
-                for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
-                    *a = *b;
-                }
-                rec[9] = 0.5 * f.dot(&vrel);
+                let power = f.dot(&vrel);
                 o.crec.push(ContactRec {
                     i: i as u32,
                     j: j as u32,
                     d,
                     f,
+                    power,
                 });
-                add10(&mut o.ps[li], &rec);
-                if is_cross {
-                    o.cstat.push(rec);
-                } else {
-                    add10(&mut o.ps[j - o.i0], &rec);
+                // (the per-particle sums only when asked for: empty otherwise)
+                if !o.ps.is_empty() {
+                    let half = 0.5 * d * f.transpose();
+                    let mut rec = [0.0; 10];
+                    for (a, b) in rec.iter_mut().zip(half.transpose().iter()) {
+                        *a = *b;
+                    }
+                    rec[9] = 0.5 * power;
+                    add10(&mut o.ps[li], &rec);
+                    if is_cross {
+                        o.cstat.push(rec);
+                    } else {
+                        add10(&mut o.ps[j - o.i0], &rec);
+                    }
                 }
             }
         }
@@ -718,13 +723,16 @@ fn wall_contacts<F, T, W, const STATS: bool>(
                     j: WALL,
                     d: gap * nrm,
                     f: pf.f,
+                    power: pf.f.dot(&vrel),
                 });
-                let full = (gap * nrm) * pf.f.transpose();
-                let acc = &mut ps[li];
-                for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
-                    *a += b;
+                if !ps.is_empty() {
+                    let full = (gap * nrm) * pf.f.transpose();
+                    let acc = &mut ps[li];
+                    for (a, b) in acc.iter_mut().zip(full.transpose().iter()) {
+                        *a += b;
+                    }
+                    acc[9] += pf.f.dot(&vrel);
                 }
-                acc[9] += pf.f.dot(&vrel);
             }
             let ov = delta / (2.0 * ri);
             if ov > out.max_ov {

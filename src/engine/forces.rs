@@ -115,7 +115,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     pub(super) fn evaluate(&mut self, hist_dt: f64, kick: f64, defer: bool) {
         // the statistics and virial paths are compiled separately, so the plain step carries
         // none of their code (nor its register pressure)
-        match (self.want_stats, D::NEEDS_VIRIAL || self.want_virial) {
+        match (
+            self.want_stats || self.want_records,
+            D::NEEDS_VIRIAL || self.want_virial,
+        ) {
             (false, false) => self.evaluate_with::<false, false>(hist_dt, kick, defer),
             (false, true) => self.evaluate_with::<false, true>(hist_dt, kick, defer),
             (true, false) => self.evaluate_with::<true, false>(hist_dt, kick, false),
@@ -132,7 +135,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         let ch = chunk_size(self.p.len());
         let tstart = Instant::now();
         let dt = hist_dt;
-        let want_stats = STATS;
+        // (the per-particle sums only when asked for them; samplers read the contact records)
+        let want_stats = STATS && self.want_stats;
         let n = self.p.len();
         let nchunks = n.div_ceil(ch);
         // sized by every build and restart (size_buffers)
@@ -220,11 +224,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         self.diag = reduce_outs(&results);
         if defer && kick > 0.0 && !STATS {
             self.cross_pending = true;
+        } else if want_stats {
+            self.kin_sum = self.cross_pass::<true>(kick);
         } else {
-            self.kin_sum = self.cross_pass::<STATS>(kick);
+            self.kin_sum = self.cross_pass::<false>(kick);
         }
         self.forces_valid = true;
         self.want_stats = false;
+        self.want_records = false;
         let te = Instant::now();
         self.timers.pair_phase += (tp - tstart).as_secs_f64();
         self.timers.gather_phase += (te - tp).as_secs_f64();

@@ -185,6 +185,8 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub want_virial: bool,
     /// Ask the next force evaluation for per-particle contact sums (samplers set this).
     pub want_stats: bool,
+    /// Ask the next force evaluation for the contact records (`crecs`; a sampled step).
+    pub want_records: bool,
     /// Time integral of the force the particles exert on each wall (trapezoid rule, which is
     /// exactly what velocity Verlet applies to the particles): momentum balances close to
     /// round-off.
@@ -201,7 +203,7 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub(crate) cross_idx: Vec<u32>,
     /// Their stress/power records when `want_stats`.
     cross_stats: Vec<Vec<[f64; 10]>>,
-    /// Per chunk, the contacts of the last evaluation with `want_stats` (for samplers).
+    /// Per chunk, the contacts of the last evaluation with `want_records` or `want_stats`.
     pub(crate) crecs: Vec<Vec<ContactRec>>,
     /// Statistics taken inside the step loop on their triggers (`crate::sampling`).
     pub samplers: Vec<Box<dyn Sampler>>,
@@ -317,6 +319,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             kin: Vec::new(),
             want_virial: false,
             want_stats: false,
+            want_records: false,
             wall_impulse: [V3::zeros(); MAX_WALLS],
             pstats: Vec::new(),
             cross: Vec::new(),
@@ -586,8 +589,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             // steps to the next sampled one (u64::MAX without samplers)
             let to_sample = crate::sampling::steps_to_next(&self.samplers, self.step);
             if to_sample == 1 {
-                // its evaluation keeps the contact records and per-particle sums
-                self.want_stats = true;
+                // its evaluation keeps the contact records
+                self.want_records = true;
                 self.step_once(k + 1 < n)?;
                 k += 1;
                 self.sample()?;
@@ -627,7 +630,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             step: self.step,
             time: self.time,
             p: &self.p,
-            pstats: &self.pstats,
             contacts: &self.crecs,
             n_contacts: self.diag.contacts,
             max_overlap: self.diag.max_overlap,

@@ -235,6 +235,7 @@ where
             && !D::NEEDS_VIRIAL
             && !self.want_virial
             && !self.want_stats
+            && !self.want_records
             && self.forces_valid
             && self.nl.valid
             && self.nl.inner_valid

@@ -38,7 +38,7 @@ const NACC: usize = 30;
 fn cap_below(z: f64, r: f64) -> f64 {
     let zc = z.clamp(-r, r);
     let a = r + zc;
-    PI * a * a * (3.0 * r - a) / 3.0
+    a * a * (3.0 * r - a) * (PI / 3.0)
 }
 
 /// The bin of coordinate x: numpy's `clip(searchsorted(edges, x, 'right') - 1, 0, nb - 1)`.
@@ -107,15 +107,19 @@ impl Lookup {
         let edges = &self.edges;
         let nb = edges.len() - 1;
         let mut acc = vec![[0.0; NACC]; nb];
-        let mut below = [0.0f64; 8];
+        // each particle's bin, for its contacts
+        let r0 = r.start;
+        let mut bins: Vec<u32> = Vec::with_capacity(r.len());
         for i in r {
             let x = p.x[i];
             let rad = p.radius[i];
             let m = p.mass[i];
             let vi = [p.v[i].x, p.v[i].y, p.v[i].z];
             let w = [p.omega[i].x, p.omega[i].y, p.omega[i].z];
-            let inertia = m * (2.0 * rad) * (2.0 * rad) / 10.0;
+            let dia = 2.0 * rad;
+            let inertia = m * dia * dia * 0.1;
             let b = self.bin(x.x);
+            bins.push(b as u32);
             let a = &mut acc[b];
             a[COUNT] += 1.0;
             a[M] += m;
@@ -131,30 +135,32 @@ impl Lookup {
             }
             a[IN] += inertia;
             a[IWW] += inertia * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
-            a[P] += v.pstats[i][9];
-            // the sphere's volume in each slab it reaches (the cap below each edge once; an
-            // edge beyond the sphere's reach gives exactly 0 or the whole sphere)
-            let (k0, k1) = (self.bin(x.x - rad), self.bin(x.x + rad));
-            if k1 - k0 + 2 <= below.len() {
-                let whole = cap_below(rad, rad);
-                for (q, k) in (k0..=k1 + 1).enumerate() {
-                    let z = edges[k] - x.x;
-                    below[q] = if z <= -rad {
-                        0.0
-                    } else if z >= rad {
-                        whole
-                    } else {
-                        cap_below(z, rad)
-                    };
+            // the sphere's volume in each slab it reaches: the caps below the edges it
+            // crosses (an edge beyond its reach cuts off nothing or the whole sphere)
+            let (lo, hi) = (x.x - rad, x.x + rad);
+            let (mut k0, mut k1) = (b, b);
+            while k0 > 0 && lo < edges[k0] {
+                k0 -= 1;
+            }
+            while k1 + 1 < nb && hi >= edges[k1 + 1] {
+                k1 += 1;
+            }
+            let whole = cap_below(rad, rad);
+            let cut = |e: f64| {
+                let z = e - x.x;
+                if z <= -rad {
+                    0.0
+                } else if z >= rad {
+                    whole
+                } else {
+                    cap_below(z, rad)
                 }
-                for k in k0..=k1 {
-                    acc[k][VOL] += below[k - k0 + 1] - below[k - k0];
-                }
-            } else {
-                for (k, slab) in acc.iter_mut().enumerate().take(k1 + 1).skip(k0) {
-                    slab[VOL] +=
-                        cap_below(edges[k + 1] - x.x, rad) - cap_below(edges[k] - x.x, rad);
-                }
+            };
+            let mut prev = cut(edges[k0]);
+            for (k, slab) in acc.iter_mut().enumerate().take(k1 + 1).skip(k0) {
+                let next = cut(edges[k + 1]);
+                slab[VOL] += next - prev;
+                prev = next;
             }
         }
         // contact stress: walls in their particle's bin, pairs along their branch vectors
@@ -162,18 +168,37 @@ impl Lookup {
             let d = [c.d.x, c.d.y, c.d.z];
             let f = [c.f.x, c.f.y, c.f.z];
             let full: [f64; 9] = std::array::from_fn(|k| d[k / 3] * f[k % 3]);
-            let xi = p.x[c.i as usize].x;
+            let ii = c.i as usize;
+            let xi = p.x[ii].x;
+            // (a chunk's records are its own particles'; any other is looked up)
+            let bi = match ii.checked_sub(r0).and_then(|k| bins.get(k)) {
+                Some(&b) => b as usize,
+                None => self.bin(xi),
+            };
             if c.j == WALL {
-                let a = &mut acc[self.bin(xi)];
+                let a = &mut acc[bi];
                 for k in 0..9 {
                     a[SC + k] += full[k];
                 }
+                a[P] += c.power;
                 continue;
             }
+            // the bins from x_i's to x_j's, searched from x_i's
             let xj = xi - d[0];
             let (lo, hi) = (xi.min(xj), xi.max(xj));
+            let (mut k0, mut k1) = (bi, bi);
+            while k0 > 0 && lo < edges[k0] {
+                k0 -= 1;
+            }
+            while k1 + 1 < nb && hi >= edges[k1 + 1] {
+                k1 += 1;
+            }
+            // the power half and half, to the bins of the two centres (x_j's bin from the
+            // branch vector: no walk to particle j; the channel is not periodic across x)
+            let half = 0.5 * c.power;
+            acc[bi][P] += half;
+            acc[if xj < xi { k0 } else { k1 }][P] += half;
             let span = hi - lo;
-            let (k0, k1) = (self.bin(lo), self.bin(hi));
             if k0 == k1 || span < 1e-12 {
                 let a = &mut acc[k0];
                 for q in 0..9 {
@@ -181,9 +206,10 @@ impl Lookup {
                 }
                 continue;
             }
+            let inv = 1.0 / span;
             for k in k0..=k1 {
                 let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
-                let share = ov.max(0.0) / span;
+                let share = ov.max(0.0) * inv;
                 let a = &mut acc[k];
                 for q in 0..9 {
                     a[SC + q] += share * full[q];
@@ -578,14 +604,17 @@ impl Sampler for Series {
     }
     fn sample(&mut self, v: &SampleView) -> Result<()> {
         let p = v.p;
-        let mut mt = 0.0;
+        // (one pass: mass, momentum and kinetic energies)
+        let (mut mt, mut ket, mut ker) = (0.0, 0.0, 0.0);
         let mut mv = crate::V3::zeros();
         for i in 0..p.len() {
-            mt += p.mass[i];
-            mv += p.mass[i] * p.v[i];
+            let m = p.mass[i];
+            mt += m;
+            mv += m * p.v[i];
+            ket += 0.5 * m * p.v[i].norm_squared();
+            ker += 0.5 * p.omega[i].norm_squared() / p.inv_inertia[i];
         }
         let vcm = mv / mt;
-        let (ket, ker) = p.kinetic_energy();
         let wf = v.wall_force;
         let imp = v.wall_impulse[0] + v.wall_impulse[1];
         let a = self.area;
@@ -681,6 +710,81 @@ mod tests {
         for (a, b) in g.iter().zip(want) {
             assert!((a - b).abs() < 1e-12, "{g:?}");
         }
+    }
+
+    /// Timing of one sample's sums (run by hand: `cargo test --release --lib sums_timing --
+    /// --ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn sums_timing() {
+        use crate::particles::Particles;
+        use crate::V3;
+        let n = 6754;
+        let mut rng = crate::rng::Rng::new(1);
+        let x: Vec<V3> = (0..n)
+            .map(|_| {
+                V3::new(
+                    20.0 * rng.uniform(),
+                    30.0 * rng.uniform(),
+                    10.0 * rng.uniform(),
+                )
+            })
+            .collect();
+        let mut x = x;
+        x.sort_by(|a, b| a.y.partial_cmp(&b.y).unwrap());
+        let d: Vec<f64> = (0..n).map(|k| [0.9, 1.0, 1.1][k % 3]).collect();
+        let mut p = Particles::new(x, &d, 1.0).unwrap();
+        for v in p.v.iter_mut() {
+            *v = V3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        }
+        let recs: Vec<Vec<ContactRec>> = (0..4)
+            .map(|c| {
+                (0..2100)
+                    .map(|k| ContactRec {
+                        i: ((c * 1689 + k % 1689) % n) as u32,
+                        j: if k % 50 == 0 { WALL } else { 5 },
+                        d: V3::new(0.6, 0.5, 0.3),
+                        f: V3::new(1.0, 2.0, 3.0),
+                        power: -0.5,
+                    })
+                    .collect()
+            })
+            .collect();
+        let wf = [V3::zeros(); 2];
+        let view = SampleView {
+            step: 1,
+            time: 0.0,
+            p: &p,
+            contacts: &recs,
+            n_contacts: 0,
+            max_overlap: 0.0,
+            wall_force: &wf,
+            wall_impulse: &wf,
+            h: crate::M3::identity(),
+            widths: [20.0, 30.0, 10.0],
+            observables: vec![],
+        };
+        let edges: Vec<f64> = (0..=20).map(|k| k as f64).collect();
+        let l = Lookup::new(&edges);
+        let reps = 2000;
+        let t = std::time::Instant::now();
+        let mut sink = 0.0;
+        for _ in 0..reps {
+            sink += l.sums(&view, 0..n, &[])[3][0];
+        }
+        let tp = t.elapsed().as_secs_f64() / reps as f64;
+        let t = std::time::Instant::now();
+        for _ in 0..reps {
+            for (c, r) in recs.iter().enumerate() {
+                sink += l.sums(&view, c * 1689..((c + 1) * 1689).min(n), r)[3][SC];
+            }
+        }
+        let tc = t.elapsed().as_secs_f64() / reps as f64;
+        println!(
+            "particles {:.1} us, particles and contacts {:.1} us ({sink})",
+            tp * 1e6,
+            tc * 1e6
+        );
     }
 
     #[test]

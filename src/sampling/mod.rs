@@ -26,13 +26,15 @@ pub const WALL: u32 = u32::MAX;
 
 /// One contact of a force evaluation with statistics: particles `i`, `j` (internal indices;
 /// `j = WALL` for a wall contact), the branch vector `d` (pairs: r_ij = x_i - x_j with the
-/// pair's periodic image; walls: from the contact point to the centre) and the force on `i`.
+/// pair's periodic image; walls: from the contact point to the centre), the force on `i` and
+/// the contact's power f . v_rel (negative when dissipating; pairs: shared half and half).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ContactRec {
     pub i: u32,
     pub j: u32,
     pub d: V3,
     pub f: V3,
+    pub power: f64,
 }
 
 /// What a sampler reads after a step whose force evaluation kept statistics.
@@ -41,9 +43,6 @@ pub struct SampleView<'a> {
     pub time: f64,
     /// The particles after the step (internal order; velocities full-step).
     pub p: &'a Particles,
-    /// Per particle: the contact stress sum S_i (row-major) and the power P_i (see
-    /// `Engine::pstats`).
-    pub pstats: &'a [[f64; 10]],
     /// The contacts of the step's evaluation, per force-loop chunk, in list order.
     pub contacts: &'a [Vec<ContactRec>],
     /// Contacts counted by the evaluation and its largest overlap / mean diameter.

@@ -73,7 +73,7 @@ class ShearCell:
     omega_g_factor: float = 2.2
     dt_frac: float = 0.02
     skin: float = 0.3
-    sample_every: int = 200
+    sample_every: int | None = 200
     seed: int = 0
     threads: int | None = None
 
@@ -92,9 +92,10 @@ class ShearCell:
             raise ParameterError(f"invalid mu_s = {self.mu_s}: allowed >= 0")
         if not (0 < self.phi0 <= 0.3):
             raise ParameterError(f"invalid phi0 = {self.phi0}: allowed 0 < phi0 <= 0.3")
-        if not (isinstance(self.sample_every, int) and self.sample_every >= 1):
-            raise ParameterError(
-                f"invalid sample_every = {self.sample_every!r}: allowed an integer >= 1")
+        if not (self.sample_every is None
+                or (isinstance(self.sample_every, int) and self.sample_every >= 1)):
+            raise ParameterError(f"invalid sample_every = {self.sample_every!r}: allowed an "
+                                 "integer >= 1, or None for no observables")
         if not (0 < self.dt_frac <= 0.1):
             raise ParameterError(f"invalid dt_frac = {self.dt_frac}: allowed 0 < dt_frac <= 0.1")
         dist = uniform(self.d_min, self.d_max)
@@ -121,7 +122,8 @@ class ShearCell:
         self._h0 = np.asarray(self.sim.cell()[0])
         self._tables = SampleTables()
         # observables inside the kernel's step loop (src/sampling/cell_obs.rs, docs/columns.md)
-        self.sim.add_sampler("cell_series", int(self.sample_every))
+        if self.sample_every is not None:
+            self.sim.add_sampler("cell_series", int(self.sample_every))
         self.phi_max = vs / length**3  # densest state seen at the run's chunk boundaries
         self.pbc = (True, True, True)
         self.wall_seconds = 0.0

@@ -77,7 +77,7 @@ class Channel:
     skin: float = 0.3
     bin_width: float = 1.0
     wall_bin: float = 1.5
-    sample_every: int = 100
+    sample_every: int | None = 100
     window: int = 50
     settle_ke: float = 1e-4
     prep_kn: float = 1e4
@@ -115,8 +115,9 @@ class Channel:
         need(self.bin_width > 0 and self.wall_bin > 0 and self.W - 2 * self.wall_bin >= 0,
              "bin_width/wall_bin", (self.bin_width, self.wall_bin),
              "positive widths with 2 wall_bin <= W")
-        need(isinstance(self.sample_every, int) and self.sample_every >= 1, "sample_every",
-             self.sample_every, "an integer >= 1")
+        need(self.sample_every is None
+             or (isinstance(self.sample_every, int) and self.sample_every >= 1), "sample_every",
+             self.sample_every, "an integer >= 1, or None for no statistics")
         need(isinstance(self.window, int) and self.window >= 1, "window", self.window,
              "an integer >= 1")
         need(self.form in ("hooke", "hertz"), "form", self.form, "'hooke' or 'hertz'")
@@ -268,7 +269,10 @@ class Channel:
                       {**other.prep_info, "prepared_with_kn": other.kn})
 
     def _add_samplers(self, core: _core.Sim) -> None:
-        """The kernel's samplers of this scene (docs/columns.md): bins and series."""
+        """The kernel's samplers of this scene (docs/columns.md): bins and series (none with
+        ``sample_every = None``)."""
+        if self.sample_every is None:
+            return
         core.add_sampler("channel_bins", self.sample_every, window=self.window,
                          edges=[float(e) for e in self.bin_edges()])
         core.add_sampler("channel_series", self.sample_every)
