@@ -15,8 +15,8 @@ comparable statistics on the same state:
   granflow: a fresh ``Channel(..., bin_width=1, wall_bin=1, sample_every=k, window=w)`` made from
   the state with ``Channel._release`` + ``set_velocities``/``set_angular_velocities``; timed
   ``scene.run(steps)`` followed by ``scene.tables()`` (the sampling and the Arrow tables a user
-  pays); "none" = the same with ``sample_every=None`` (no samplers: the bare kernel). The set-up force evaluation is
-  outside the timing, as LAMMPS's Loop time excludes its setup.
+  pays); "none" = the same with ``sample_every=None`` (no samplers: the bare kernel). The
+  set-up force evaluation is outside the timing, as LAMMPS's Loop time excludes its setup.
   LAMMPS (``benchmarks/lammps_peer.py``, scene 'channel', the law of
   ``compare_lammps.lmp_params`` with kn = 1e5 and gamma_n from e_n at the mean pair's m_eff, the
   same skin as granflow's): for statistics every k steps ``compute chunk/atom bin/1d x lower 1.0``

@@ -5,7 +5,6 @@ import threading
 
 import granflow as gf
 import numpy as np
-import pyarrow as pa
 import pytest
 
 

@@ -17,9 +17,9 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from granflow import ParameterError
-from granflow.simulation import Box, Simulation, Wall
 from granflow.scenes.cell import ShearCell
 from granflow.scenes.channel import Channel
+from granflow.simulation import Box, Simulation, Wall
 from reference_samplers import ChannelReference, cell_observe
 
 RTOL = 1e-11
