@@ -40,10 +40,16 @@ cell's observables every 10 steps <= 15 %. Writes benchmarks/out/study_throughpu
 
 from __future__ import annotations
 
-import argparse
-import json
-import math
-import platform
+import os
+
+# numpy's OpenBLAS threads spin after each call; on two cores they take the second core from
+# granflow's second thread (set before numpy is imported)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import platform  # noqa: E402
 import sys
 import tempfile
 import time

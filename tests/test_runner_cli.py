@@ -144,24 +144,55 @@ def test_sweep_records_a_failing_run_and_goes_on(tmp_path):
     assert "Error" in df.filter(pl.col("kn") == 1e-3)["error"][0]
 
 
-def test_failed_run_keeps_what_it_recorded(tmp_path):
+def test_failed_run_keeps_what_it_recorded(tmp_path, monkeypatch):
     spec = {**GAS, "params": {**GAS["params"], "sample_every": 10}, "run": {"steps": 100_000},
             "output": {}}
-    import granflow.scenes.gas as sc
+    from granflow.scenes._base import SampleTables
 
-    orig = sc.PeriodicGas._sample
+    orig = SampleTables.drain
+    fired = []
 
-    def boom(self):
-        orig(self)
-        if self.sim.step >= 200:
-            raise gf.InstabilityError("instability at step 200: test")
+    def boom(self, core):  # once, after a chunk of the run past step 200
+        orig(self, core)
+        if core.step >= 200 and not fired:
+            fired.append(core.step)
+            raise gf.InstabilityError(f"instability at step {core.step}: test")
 
-    sc.PeriodicGas._sample = boom
-    try:
-        with pytest.raises(gf.InstabilityError):
-            execute(spec, tmp_path / "f", progress=False)
-    finally:
-        sc.PeriodicGas._sample = orig
+    monkeypatch.setattr(SampleTables, "drain", boom)
+    with pytest.raises(gf.InstabilityError):
+        execute(spec, tmp_path / "f", progress=False)
     man = json.loads((tmp_path / "f" / "manifest.json").read_text())
-    assert man["status"] == "failed"
-    assert pl.read_parquet(tmp_path / "f" / "series.parquet").height == 20
+    assert man["status"] == "failed" and man["steps_done"] >= 200
+    assert pl.read_parquet(tmp_path / "f" / "series.parquet").height == man["steps_done"] // 10
+
+
+def test_duckdb_and_polars_lazy_scan_read_a_sweeps_channel_tables(tmp_path):
+    """A sweep's runs land in one hive-partitioned dataset (root/mu=../seed=../bins.parquet):
+    DuckDB and polars' lazy scan read the kernel samplers' tables across the runs as one, with
+    the partition keys as columns."""
+    duckdb = pytest.importorskip("duckdb")
+    base = {"scene": "channel",
+            "params": {"W": 6.0, "H": 8.0, "B": 3.5, "phi_bar": 0.6, "kn": 1e5, "dt": 3e-4,
+                       "sample_every": 10, "window": 5},
+            "run": {"steps": 300}, "output": {}}
+    df = run_grid(base, {"mu": [0.2, 0.5]}, tmp_path, seeds=[1], workers=2)
+    assert set(df["status"]) == {"finished"}
+    per_run = {
+        mu: pl.read_parquet(tmp_path / f"mu={mu}" / "seed=1" / "bins.parquet")
+        for mu in (0.2, 0.5)
+    }
+    glob = str(tmp_path / "**" / "bins.parquet")
+    con = duckdb.connect()
+    rows = con.execute(
+        "SELECT mu, seed, count(*) AS n, max(\"window\") AS w, avg(phi) AS phi "
+        f"FROM read_parquet('{glob}', hive_partitioning = true) GROUP BY mu, seed ORDER BY mu"
+    ).fetchall()
+    assert [(float(r[0]), int(r[1])) for r in rows] == [(0.2, 1), (0.5, 1)]
+    for mu, _seed, n, w, phi in rows:
+        t = per_run[float(mu)]
+        assert n == t.height and w == t["window"].max() == 300 // 50 - 1
+        assert phi == pytest.approx(t["phi"].mean(), rel=1e-12)
+    lazy = (pl.scan_parquet(glob, hive_partitioning=True)
+            .filter(pl.col("window") == 0).select("mu", "bin", "phi").collect())
+    assert lazy.height == 2 * per_run[0.2].filter(pl.col("window") == 0).height
+    assert set(lazy["mu"].to_list()) == {0.2, 0.5}

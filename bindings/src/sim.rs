@@ -391,7 +391,8 @@ impl Sim {
     }
     /// Add a sampler that runs inside the step loop every `every` steps (at multiples of it in
     /// the step count): `kind` one of "channel_bins" (needs `window` and the bin `edges`
-    /// from x = 0 to x = W), "channel_series", "cell_series"; `columns` keeps only those.
+    /// from x = 0 to x = W), "channel_series", "cell_series", "series" (energies, contacts
+    /// and the largest overlap, for any simulation); `columns` keeps only those.
     /// Its tables come out of `take_tables` as Arrow batches.
     #[pyo3(signature = (kind, every, window=1, edges=None, columns=None))]
     fn add_sampler(

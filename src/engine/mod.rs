@@ -589,9 +589,14 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             // steps to the next sampled one (u64::MAX without samplers)
             let to_sample = crate::sampling::steps_to_next(&self.samplers, self.step);
             if to_sample == 1 {
-                // its evaluation keeps the contact records
-                self.want_records = true;
-                self.step_once(k + 1 < n)?;
+                // its evaluation keeps the contact records if a due sampler reads them; the
+                // step is completed (no pass deferred): the samplers read full-step velocities
+                let step = self.step + 1;
+                self.want_records = self
+                    .samplers
+                    .iter()
+                    .any(|s| step.is_multiple_of(s.every()) && s.needs_contacts());
+                self.step_once(false)?;
                 k += 1;
                 self.sample()?;
                 continue;
@@ -626,6 +631,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     /// Hand the state after a sampled step to the samplers due at this step.
     fn sample(&mut self) -> Result<()> {
         let nw = self.walls.planes().len();
+        let step = self.step;
+        let elastic = self
+            .samplers
+            .iter()
+            .any(|s| step.is_multiple_of(s.every()) && s.needs_elastic())
+            .then(|| self.elastic_energy_sum());
         let view = SampleView {
             step: self.step,
             time: self.time,
@@ -638,8 +649,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             h: self.domain.h(),
             widths: self.domain.widths().into(),
             observables: self.domain.observables(),
+            elastic,
         };
-        let step = self.step;
         for s in self.samplers.iter_mut() {
             if step.is_multiple_of(s.every()) {
                 s.sample(&view)?;

@@ -763,6 +763,7 @@ mod tests {
             h: crate::M3::identity(),
             widths: [20.0, 30.0, 10.0],
             observables: vec![],
+            elastic: None,
         };
         let edges: Vec<f64> = (0..=20).map(|k| k as f64).collect();
         let l = Lookup::new(&edges);

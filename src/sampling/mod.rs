@@ -56,6 +56,8 @@ pub struct SampleView<'a> {
     pub widths: [f64; 3],
     /// The domain's named observables (a deforming cell's L, stresses and tilt flips).
     pub observables: Vec<(String, f64)>,
+    /// The elastic energy stored in the contacts, when a due sampler asked for it.
+    pub elastic: Option<f64>,
 }
 
 impl SampleView<'_> {
@@ -103,6 +105,14 @@ pub trait Sampler: Send + Sync {
     fn every(&self) -> u64;
     /// Every column it outputs, in order.
     fn columns(&self) -> Vec<&'static str>;
+    /// Whether it reads the step's contacts (then the sampled step keeps them).
+    fn needs_contacts(&self) -> bool {
+        true
+    }
+    /// Whether it reads the elastic energy (a sum over the contacts, computed for it).
+    fn needs_elastic(&self) -> bool {
+        false
+    }
     /// Take one sample of the state after a step.
     fn sample(&mut self, v: &SampleView) -> Result<()>;
     /// The tables closed since the last call (all columns), oldest first.
@@ -121,7 +131,7 @@ pub(crate) fn table_bytes(t: &Table) -> usize {
 }
 
 /// The sampler kinds, for error messages.
-pub const KINDS: [&str; 3] = ["channel_bins", "channel_series", "cell_series"];
+pub const KINDS: [&str; 4] = ["channel_bins", "channel_series", "cell_series", "series"];
 
 /// Make a sampler of `kind` (one of [`KINDS`]).
 pub fn make(kind: &str, spec: SamplerSpec, setup: &Setup) -> Result<Box<dyn Sampler>> {
@@ -137,6 +147,7 @@ pub fn make(kind: &str, spec: SamplerSpec, setup: &Setup) -> Result<Box<dyn Samp
         "channel_bins" => Box::new(channel::Bins::new(&spec, setup)?),
         "channel_series" => Box::new(channel::Series::new(&spec, setup)?),
         "cell_series" => Box::new(cell::Series::new(&spec, setup)?),
+        "series" => Box::new(Energies::new(&spec)),
         _ => {
             return Err(Error::param(
                 "sampler",
@@ -158,6 +169,91 @@ pub fn make(kind: &str, spec: SamplerSpec, setup: &Setup) -> Result<Box<dyn Samp
             }
             Ok(Box::new(Select { inner: s, cols }))
         }
+    }
+}
+
+/// The `series` of any simulation: energies, contacts and the largest overlap per sample
+/// (step, t, ke_trans, ke_rot, elastic, n_contacts, max_overlap).
+pub struct Energies {
+    every: u64,
+    rows: Rows,
+}
+
+const ENERGIES: [&str; 7] = [
+    "step",
+    "t",
+    "ke_trans",
+    "ke_rot",
+    "elastic",
+    "n_contacts",
+    "max_overlap",
+];
+
+impl Energies {
+    fn new(spec: &SamplerSpec) -> Self {
+        Energies {
+            every: spec.every,
+            rows: Rows::new(ENERGIES.to_vec(), vec![""; ENERGIES.len()], &["step"]),
+        }
+    }
+}
+
+impl Sampler for Energies {
+    fn kind(&self) -> &'static str {
+        "series"
+    }
+    fn table(&self) -> &'static str {
+        "series"
+    }
+    fn every(&self) -> u64 {
+        self.every
+    }
+    fn columns(&self) -> Vec<&'static str> {
+        ENERGIES.to_vec()
+    }
+    fn needs_contacts(&self) -> bool {
+        false
+    }
+    fn needs_elastic(&self) -> bool {
+        true
+    }
+    fn sample(&mut self, v: &SampleView) -> Result<()> {
+        let (ket, ker) = v.p.kinetic_energy();
+        let row = [
+            v.step as f64,
+            v.time,
+            ket,
+            ker,
+            v.elastic.unwrap_or(0.0),
+            v.n_contacts as f64,
+            v.max_overlap,
+        ];
+        self.rows.push(&row);
+        Ok(())
+    }
+    fn take(&mut self) -> Vec<Table> {
+        if self.rows.len() == 0 {
+            return Vec::new();
+        }
+        let mut t = self.rows.drain();
+        t.metadata
+            .push(("granflow.sampler".into(), "series".into()));
+        vec![t]
+    }
+    fn save(&self) -> Vec<f64> {
+        self.rows.flat()
+    }
+    fn load(&mut self, s: &[f64]) -> Result<()> {
+        if s.is_empty() {
+            for c in &mut self.rows.data {
+                c.clear();
+            }
+            return Ok(());
+        }
+        self.rows.set_flat(s)
+    }
+    fn bytes(&self) -> usize {
+        self.rows.bytes()
     }
 }
 
@@ -188,6 +284,12 @@ impl Sampler for Select {
     }
     fn every(&self) -> u64 {
         self.inner.every()
+    }
+    fn needs_contacts(&self) -> bool {
+        self.inner.needs_contacts()
+    }
+    fn needs_elastic(&self) -> bool {
+        self.inner.needs_elastic()
     }
     fn columns(&self) -> Vec<&'static str> {
         self.inner

@@ -12,10 +12,18 @@ import numpy as np
 import pyarrow as pa
 
 from granflow import _core
-from granflow.simulation import Box, ContactLaw, Simulation, maxwell_velocities, random_packing
+from granflow.errors import ParameterError
+from granflow.simulation import (
+    Box,
+    ContactLaw,
+    Simulation,
+    maxwell_velocities,
+    random_packing,
+    run_chunked,
+)
 from granflow.sizes import uniform
 
-from ._base import check_keys, register, run_with_checkpoints
+from ._base import SampleTables, check_keys, register, run_with_checkpoints
 
 
 @register("gas")
@@ -48,7 +56,12 @@ class PeriodicGas:
             x, d, box, ContactLaw(kn=self.kn, e_n=self.e_n, mu=self.mu), velocities=v,
             threads=self.threads,
         )
-        self._rows: list[dict[str, float]] = []
+        if not (isinstance(self.sample_every, int) and self.sample_every >= 1):
+            raise ParameterError(
+                f"invalid sample_every = {self.sample_every!r}: allowed an integer >= 1")
+        self._tables = SampleTables()
+        # the series is taken inside the kernel's step loop
+        self.sim.core.add_sampler("series", int(self.sample_every))
         self.pbc = (True, True, True)
 
     @property
@@ -68,16 +81,6 @@ class PeriodicGas:
     def parameters(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "threads"}
 
-    def _sample(self) -> None:
-        e = self.sim.energies()
-        dg = self.sim.diagnostics()
-        self._rows.append({
-            "step": self.sim.step, "t": self.sim.time,
-            "ke_trans": e["kinetic_translational"], "ke_rot": e["kinetic_rotational"],
-            "elastic": e["elastic"], "n_contacts": dg["contacts"],
-            "max_overlap": dg["max_overlap"],
-        })
-
     def run(self, steps: int, progress: bool | None = None,
             checkpoint: str | os.PathLike[str] | None = None,
             checkpoint_every: int | None = None) -> None:
@@ -85,34 +88,32 @@ class PeriodicGas:
         ``checkpoint_every`` as :class:`granflow.scenes.Scene` says."""
 
         def advance(steps: int) -> None:
-            done = 0
-            while done < steps:
-                c = min(self.sample_every - self.sim.step % self.sample_every, steps - done)
-                self.sim.run(c, progress=progress)
-                done += c
-                if self.sim.step % self.sample_every == 0:
-                    self._sample()
+            core = self.sim.core
+            run_chunked(core, steps, progress, self.sim,
+                        after_chunk=lambda: self._tables.drain(core))
 
         run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
     def tables(self) -> dict[str, pa.Table]:
-        if not self._rows:
-            return {}
-        return {"series": pa.Table.from_pylist(self._rows)}
+        self._tables.drain(self.sim.core)
+        return self._tables.tables()
 
     def load_tables(self, tables: Mapping[str, pa.Table]) -> None:
-        if "series" in tables:
-            self._rows = tables["series"].to_pylist()
+        self._tables.load(tables)
 
     def summary(self) -> dict[str, Any]:
-        if not self._rows:
+        t = self.tables().get("series")
+        if t is None:
             return {}
-        ke = np.array([r["ke_trans"] for r in self._rows])
+        ke = t["ke_trans"].to_numpy()
         return {"n": self.sim.n, "steps": self.sim.step, "ke_trans_mean": float(ke.mean()),
                 "ke_trans_last": float(ke[-1])}
 
     def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
+        self._tables.drain(self.sim.core)
         self.sim.save_checkpoint(path)
 
     def restore(self, path: str | os.PathLike[str]) -> None:
-        self.sim = Simulation.from_checkpoint(path, threads=self.threads)
+        self.sim = Simulation.from_checkpoint(
+            path, threads=self.threads,
+            configure=lambda core: core.add_sampler("series", int(self.sample_every)))
