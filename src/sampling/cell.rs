@@ -95,13 +95,7 @@ impl Sampler for Series {
         Ok(())
     }
     fn take(&mut self) -> Vec<Table> {
-        if self.rows.len() == 0 {
-            return Vec::new();
-        }
-        let mut t = self.rows.drain();
-        t.metadata
-            .push(("granflow.sampler".into(), "cell_series".into()));
-        vec![t]
+        self.rows.take("cell_series")
     }
     fn save(&self) -> Vec<f64> {
         let mut s: Vec<f64> = self.h0.iter().copied().collect();
@@ -115,12 +109,6 @@ impl Sampler for Series {
             });
         }
         self.h0 = M3::from_column_slice(&s[..9]);
-        if s.len() == 9 {
-            for c in &mut self.rows.data {
-                c.clear();
-            }
-            return Ok(());
-        }
         self.rows.set_flat(&s[9..])
     }
     fn bytes(&self) -> usize {

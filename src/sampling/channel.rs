@@ -242,7 +242,7 @@ fn gradient(y: &[f64], x: &[f64]) -> Vec<f64> {
 pub struct Bins {
     every: u64,
     window: u64,
-    edges: Vec<f64>,
+    /// The bin edges and their lookup.
     lookup: Lookup,
     /// Bin volumes (width x H x B).
     vbin: Vec<f64>,
@@ -288,7 +288,6 @@ impl Bins {
         Ok(Bins {
             every: spec.every,
             window: spec.window,
-            edges: e.clone(),
             lookup: Lookup::new(e),
             vbin,
             acc: vec![[0.0; NACC]; nb],
@@ -304,8 +303,9 @@ impl Bins {
     /// the bits do not depend on the thread count.
     fn accumulate(&mut self, v: &SampleView) {
         let n = v.p.len();
-        let nch = v.contacts.len().max(1);
-        let ch = n.div_ceil(nch);
+        // the force loop's chunks (the records are theirs)
+        let ch = crate::neighbor::chunk_size(n);
+        let nch = n.div_ceil(ch);
         let lookup = &self.lookup;
         let parts: Vec<Vec<[f64; NACC]>> = (0..nch)
             .into_par_iter()
@@ -328,8 +328,7 @@ impl Bins {
     fn close(&mut self, t1: f64) -> Table {
         let ns = self.n as f64;
         let nb = self.acc.len();
-        let edges = &self.edges;
-        let mut cols: Vec<(&str, Vec<f64>)> = Vec::new();
+        let edges = &self.lookup.edges;
         let a = &self.acc;
         let vb: Vec<f64> = self.vbin.iter().map(|v| v * ns).collect();
         let xc: Vec<f64> = edges.windows(2).map(|p| 0.5 * (p[1] + p[0])).collect();
@@ -379,23 +378,13 @@ impl Bins {
         t.push_f64("x_lo", "d", edges[..nb].to_vec());
         t.push_f64("x_hi", "d", edges[1..].to_vec());
         t.push_f64("x", "d", xc.clone());
-        cols.push(("count", col(&|b| a[b][COUNT] / ns)));
-        cols.push(("phi", col(&|b| a[b][VOL] / vb[b])));
+        t.push_f64("count", "", col(&|b| a[b][COUNT] / ns));
+        t.push_f64("phi", "", col(&|b| a[b][VOL] / vb[b]));
         for (k, c) in ["u_x", "u_y", "u_z"].iter().enumerate() {
-            cols.push((c, col(&|b| u[b][k])));
+            t.push_f64(c, "sqrt(g d)", col(&|b| u[b][k]));
         }
         for (k, c) in ["w_x", "w_y", "w_z"].iter().enumerate() {
-            cols.push((c, col(&|b| om[b][k])));
-        }
-        for (name, unit, data) in cols.drain(..).map(|(n, d)| {
-            let unit = match n {
-                "count" | "phi" => "",
-                "w_x" | "w_y" | "w_z" => "sqrt(g/d)",
-                _ => "sqrt(g d)",
-            };
-            (n, unit, d)
-        }) {
-            t.push_f64(name, unit, data);
+            t.push_f64(c, "sqrt(g/d)", col(&|b| om[b][k]));
         }
         t.push_f64("T", "g d", temp);
         let stress = "rho_p g d";
@@ -419,49 +408,39 @@ impl Bins {
         t
     }
 
+    /// The columns in order (built once: the stress names are made from their parts).
     pub fn column_names() -> Vec<&'static str> {
-        let mut c = vec![
-            "window",
-            "t0",
-            "t1",
-            "n_samples",
-            "bin",
-            "x_lo",
-            "x_hi",
-            "x",
-            "count",
-            "phi",
-            "u_x",
-            "u_y",
-            "u_z",
-            "w_x",
-            "w_y",
-            "w_z",
-            "T",
-        ];
-        for pre in ["sigma_", "sigma_c_", "sigma_k_"] {
-            for s in SIGMA {
-                c.push(leak(format!("{pre}{s}")));
+        static NAMES: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+        let names = NAMES.get_or_init(|| {
+            let mut c: Vec<String> = [
+                "window",
+                "t0",
+                "t1",
+                "n_samples",
+                "bin",
+                "x_lo",
+                "x_hi",
+                "x",
+                "count",
+                "phi",
+                "u_x",
+                "u_y",
+                "u_z",
+                "w_x",
+                "w_y",
+                "w_z",
+                "T",
+            ]
+            .map(String::from)
+            .to_vec();
+            for pre in ["sigma_", "sigma_c_", "sigma_k_"] {
+                c.extend(SIGMA.iter().map(|s| format!("{pre}{s}")));
             }
-        }
-        c.push("Gamma");
-        c.push("shear_production");
-        c
+            c.extend(["Gamma".to_string(), "shear_production".to_string()]);
+            c
+        });
+        names.iter().map(String::as_str).collect()
     }
-}
-
-/// Column names built at run time live as long as the program (a few dozen, once).
-fn leak(s: String) -> &'static str {
-    use std::collections::HashMap;
-    use std::sync::{Mutex, OnceLock};
-    static NAMES: OnceLock<Mutex<HashMap<String, &'static str>>> = OnceLock::new();
-    let mut m = NAMES.get_or_init(Default::default).lock().unwrap();
-    if let Some(s) = m.get(&s) {
-        return s;
-    }
-    let l: &'static str = Box::leak(s.clone().into_boxed_str());
-    m.insert(s, l);
-    l
 }
 
 impl Sampler for Bins {
@@ -604,17 +583,9 @@ impl Sampler for Series {
     }
     fn sample(&mut self, v: &SampleView) -> Result<()> {
         let p = v.p;
-        // (one pass: mass, momentum and kinetic energies)
-        let (mut mt, mut ket, mut ker) = (0.0, 0.0, 0.0);
-        let mut mv = crate::V3::zeros();
-        for i in 0..p.len() {
-            let m = p.mass[i];
-            mt += m;
-            mv += m * p.v[i];
-            ket += 0.5 * m * p.v[i].norm_squared();
-            ker += 0.5 * p.omega[i].norm_squared() / p.inv_inertia[i];
-        }
-        let vcm = mv / mt;
+        let mv = p.momentum();
+        let vcm = mv / p.mass.iter().sum::<f64>();
+        let (ket, ker) = p.kinetic_energy();
         let wf = v.wall_force;
         let imp = v.wall_impulse[0] + v.wall_impulse[1];
         let a = self.area;
@@ -641,33 +612,15 @@ impl Sampler for Series {
             imp.y,
             imp.z,
         ];
-        if let Some(k) = row.iter().position(|x| !x.is_finite()) {
-            let mut t = Table::new();
-            t.push_f64(self.rows.names[k], "", vec![row[k]]);
-            check_finite("channel series", v.step, &t)?;
-        }
-        self.rows.push(&row);
-        Ok(())
+        self.rows.push_finite("channel series", v.step, &row)
     }
     fn take(&mut self) -> Vec<Table> {
-        if self.rows.len() == 0 {
-            return Vec::new();
-        }
-        let mut t = self.rows.drain();
-        t.metadata
-            .push(("granflow.sampler".into(), "channel_series".into()));
-        vec![t]
+        self.rows.take("channel_series")
     }
     fn save(&self) -> Vec<f64> {
         self.rows.flat()
     }
     fn load(&mut self, s: &[f64]) -> Result<()> {
-        if s.is_empty() {
-            for c in &mut self.rows.data {
-                c.clear();
-            }
-            return Ok(());
-        }
         self.rows.set_flat(s)
     }
     fn bytes(&self) -> usize {

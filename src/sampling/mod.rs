@@ -228,28 +228,15 @@ impl Sampler for Energies {
             v.n_contacts as f64,
             v.max_overlap,
         ];
-        self.rows.push(&row);
-        Ok(())
+        self.rows.push_finite("series", v.step, &row)
     }
     fn take(&mut self) -> Vec<Table> {
-        if self.rows.len() == 0 {
-            return Vec::new();
-        }
-        let mut t = self.rows.drain();
-        t.metadata
-            .push(("granflow.sampler".into(), "series".into()));
-        vec![t]
+        self.rows.take("series")
     }
     fn save(&self) -> Vec<f64> {
         self.rows.flat()
     }
     fn load(&mut self, s: &[f64]) -> Result<()> {
-        if s.is_empty() {
-            for c in &mut self.rows.data {
-                c.clear();
-            }
-            return Ok(());
-        }
         self.rows.set_flat(s)
     }
     fn bytes(&self) -> usize {
@@ -329,19 +316,24 @@ pub fn steps_to_next(samplers: &[Box<dyn Sampler>], step: u64) -> u64 {
         .unwrap_or(u64::MAX)
 }
 
+/// The error of a non-finite value in a sampler's column (results never carry NaN).
+pub(crate) fn nonfinite(kind: &str, step: u64, column: &str) -> Error {
+    Error::Instability {
+        step,
+        particles: vec![],
+        message: format!("non-finite value in {kind} column {column}"),
+        cause: "the state itself went bad (the kernel's guards check it only every few \
+                steps) or a bin is degenerate"
+            .into(),
+    }
+}
+
 /// A table's rows must never carry NaN: name the first bad column.
 pub(crate) fn check_finite(kind: &str, step: u64, t: &Table) -> Result<()> {
     for (name, _, col) in &t.columns {
         if let Column::F64(v) = col {
             if v.iter().any(|x| !x.is_finite()) {
-                return Err(Error::Instability {
-                    step,
-                    particles: vec![],
-                    message: format!("non-finite value in {kind} column {name}"),
-                    cause: "the state itself went bad (the kernel's guards check it only \
-                            every few steps) or a bin is degenerate"
-                        .into(),
-                });
+                return Err(nonfinite(kind, step, name));
             }
         }
     }
@@ -380,6 +372,24 @@ impl Rows {
             c.push(*v);
         }
     }
+    /// `push`, refusing a row with a non-finite value (naming its column).
+    pub fn push_finite(&mut self, kind: &str, step: u64, row: &[f64]) -> Result<()> {
+        if let Some(k) = row.iter().position(|x| !x.is_finite()) {
+            return Err(nonfinite(kind, step, self.names[k]));
+        }
+        self.push(row);
+        Ok(())
+    }
+    /// The buffered rows as one table naming its sampler (none when empty); the buffer is
+    /// left empty.
+    pub fn take(&mut self, sampler: &str) -> Vec<Table> {
+        if self.len() == 0 {
+            return Vec::new();
+        }
+        let mut t = self.drain();
+        t.metadata.push(("granflow.sampler".into(), sampler.into()));
+        vec![t]
+    }
     /// The buffered rows as a table; the buffer is left empty.
     pub fn drain(&mut self) -> Table {
         let mut t = Table::new();
@@ -402,6 +412,7 @@ impl Rows {
         }
         out
     }
+    /// Restore what `flat` wrote (empty: no rows).
     pub fn set_flat(&mut self, s: &[f64]) -> Result<()> {
         let w = self.data.len();
         if w == 0 || !s.len().is_multiple_of(w) {
