@@ -6,6 +6,9 @@
 //! writes such files.
 //! Knobs (environment): PRUNE=k prune interval, FUSE=n fused sweep from n particles,
 //! NO_TEAM=1 steps through rayon only, NO_PRUNE_TEAM=1 prunes outside the team,
+//! KN=k normal stiffness (default 1e6), SAMPLE=k the channel's bins and series every k steps,
+//! AB=b runs two engines from the state in alternating blocks of b steps, A with the knobs
+//! above, B also with SAMPLE, KINDS and CHECK=k (guard checks every k steps): B's time over A's.
 //! PAD=b allocate b bytes first (shifts the heap layout), PIN=1 pins worker i to CPU i.
 use granflow::components::{Body, Plane, Walls};
 use granflow::contact::{Form, Friction, LawInput, LawSpec};
@@ -16,24 +19,107 @@ use granflow::scene::{build_with, DomainSpec, EngineSink, FormKind, SceneSpec};
 use granflow::V3;
 use std::time::Instant;
 
-/// Receives the engine `granflow::scene` composes, sets the knobs and runs it.
+/// Receives the engine `granflow::scene` composes, sets the knobs and runs it; with AB=b,
+/// composes a second engine from `second` and runs the two side by side.
 struct Bench {
     steps: u64,
+    second: Option<SceneSpec>,
 }
 
 impl EngineSink for Bench {
     type Output = ();
     fn take<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
         self,
-        e: Engine<F, T, D, W, G>,
+        mut e: Engine<F, T, D, W, G>,
     ) {
-        go(e, self.steps)
+        match self.second {
+            None => {
+                knobs(&mut e, true);
+                go(e, self.steps)
+            }
+            Some(spec) => {
+                knobs(&mut e, false);
+                build_with(
+                    spec,
+                    Second {
+                        a: e,
+                        steps: self.steps,
+                    },
+                )
+                .unwrap()
+            }
+        }
     }
 }
 
-fn go<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
-    mut e: Engine<F, T, D, W, G>,
+/// AB=b: engine A (the shared knobs only) and engine B (also CHECK, SAMPLE, KINDS) from the
+/// same state, run in alternating blocks of b steps (the order swapped every round), so that
+/// the VM's drifting speed falls on both alike; prints B's time over A's.
+struct Second<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
+    a: Engine<F, T, D, W, G>,
     steps: u64,
+}
+
+impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> EngineSink
+    for Second<F, T, D, W, G>
+{
+    type Output = ();
+    fn take<F2: Form, T2: Friction, D2: Domain, W2: Walls<F2, T2>, G2: Body>(
+        self,
+        mut b: Engine<F2, T2, D2, W2, G2>,
+    ) {
+        knobs(&mut b, true);
+        let mut a = self.a;
+        let block: u64 = std::env::var("AB")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(500);
+        a.run(10).unwrap();
+        b.run(10).unwrap();
+        b.timers = Default::default();
+        let rounds = self.steps.div_ceil(block);
+        let (mut ta, mut tb) = (0.0, 0.0);
+        let mut ratios = Vec::new();
+        for r in 0..rounds {
+            let mut time_a = || {
+                let t = Instant::now();
+                a.run(block).unwrap();
+                t.elapsed().as_secs_f64()
+            };
+            let mut time_b = || {
+                let t = Instant::now();
+                b.run(block).unwrap();
+                t.elapsed().as_secs_f64()
+            };
+            let (x, y) = if r % 2 == 0 {
+                let x = time_a();
+                (x, time_b())
+            } else {
+                let y = time_b();
+                (time_a(), y)
+            };
+            ta += x;
+            tb += y;
+            ratios.push(y / x);
+        }
+        ratios.sort_by(f64::total_cmp);
+        let n = a.p.len() as f64 * (rounds * block) as f64;
+        println!(
+            "A {:.3e} B {:.3e} particle-steps/s; B/A time {:.4} (median of {} blocks {:.4}); B's samplers {:.1} us a step",
+            n / ta,
+            n / tb,
+            tb / ta,
+            rounds,
+            ratios[ratios.len() / 2],
+            b.timers.sampling / (rounds * block) as f64 * 1e6
+        );
+    }
+}
+
+/// The knobs from the environment (`b`: also those only engine B of an A/B run takes).
+fn knobs<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
+    e: &mut Engine<F, T, D, W, G>,
+    b: bool,
 ) {
     if let Some(k) = std::env::var("PRUNE").ok().and_then(|s| s.parse().ok()) {
         e.tuning.prune_steps = k;
@@ -47,6 +133,38 @@ fn go<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
     if std::env::var_os("NO_TEAM").is_some() {
         e.tuning.team = false;
     }
+    if !b {
+        return;
+    }
+    if let Some(k) = std::env::var("CHECK").ok().and_then(|s| s.parse().ok()) {
+        e.guards.check_every = k;
+    }
+    // SAMPLE=k: the channel's bins (1 wide) and series every k steps, windows of 50
+    if let Some(k) = std::env::var("SAMPLE")
+        .ok()
+        .and_then(|s| s.parse::<u64>().ok())
+    {
+        let w = e.domain.widths().x;
+        let edges: Vec<f64> = (0..=w.round() as usize)
+            .map(|i| i as f64 * w / w.round())
+            .collect();
+        let kinds = std::env::var("KINDS").unwrap_or("channel_bins,channel_series".into());
+        for kind in kinds.split(',') {
+            let spec = granflow::sampling::SamplerSpec {
+                every: k,
+                window: 50,
+                edges: edges.clone(),
+                columns: None,
+            };
+            e.add_sampler(kind, spec).unwrap();
+        }
+    }
+}
+
+fn go<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
+    mut e: Engine<F, T, D, W, G>,
+    steps: u64,
+) {
     e.run(10).unwrap();
     e.timers = Default::default();
     let b0 = e.nl.builds;
@@ -76,6 +194,12 @@ fn go<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body>(
     println!("checksum (x + v by id) {sum:.17e}");
     for (name, b) in e.memory_list() {
         println!("  {name}: {:.1} B/particle", b as f64 / n as f64);
+    }
+    if e.timers.sampling > 0.0 {
+        println!(
+            "samplers {:.1} us a step",
+            e.timers.sampling / steps as f64 * 1e6
+        );
     }
     println!(
         "N={n} steps={steps} {}: {:.3e} particle-steps/s wall, {:.3e} per CPU-second",
@@ -133,7 +257,12 @@ fn main() {
     }
     let law = LawSpec::resolve(
         &LawInput {
-            kn: Some(1e6),
+            kn: Some(
+                std::env::var("KN")
+                    .ok()
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or(1e6),
+            ),
             e_n: Some(0.82),
             mu: Some(mu),
             ..LawInput::default()
@@ -182,6 +311,7 @@ fn main() {
                 .and_then(|s| s.parse().ok())
                 .unwrap_or(0)
         ];
-        build_with(spec, Bench { steps }).unwrap();
+        let second = std::env::var_os("AB").map(|_| spec.clone());
+        build_with(spec, Bench { steps, second }).unwrap();
     });
 }

@@ -248,6 +248,37 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     }
 }
 
+/// The cross buffers, their statistics and the cross index, as the cross pass reads them.
+pub(super) type CrossBufs<'a> = (&'a [Vec<PairOut>], &'a [Vec<[f64; 10]>], &'a [u32]);
+
+/// The cross pass and final half-kick of one chunk's particles `r` alone (`cross_pass` for
+/// one chunk, plain NVE: a team's completed last step); `f, t, v, w` are the chunk's slices.
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one chunk's slices of the team's shared arrays, passed as they are split"
+)]
+pub(super) fn finish_chunk<T: Friction>(
+    nl: &NeighborList,
+    (cross, cstat, cidx): CrossBufs,
+    per: (&[f64], &[f64], &[f64]),
+    r: std::ops::Range<usize>,
+    kick: f64,
+    (fo, to): (&mut [V3], &mut [V3]),
+    vo: &mut [V3],
+    wo: &mut [V3],
+) {
+    let src = CrossSrc::new(nl, cross, cstat, cidx, per, r, kick);
+    let k = CrossChunk {
+        fo,
+        to,
+        vo,
+        wo,
+        ps: &mut [],
+        s: &src,
+    };
+    cross_kick_chunk::<false, T>(k, None);
+}
+
 /// What the cross-chunk pass reads for one chunk.
 struct CrossSrc<'a> {
     /// cross_start of the chunk's particles (one more than the chunk).

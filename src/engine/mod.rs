@@ -46,7 +46,7 @@ mod chunk;
 mod forces;
 mod guards;
 mod integrate;
-mod simd;
+pub(crate) mod simd;
 mod team;
 
 pub use chunk::PairOut;
@@ -88,6 +88,8 @@ pub struct Timers {
     /// ... and the cross-chunk pass with the final half-kick, when not deferred to the next
     /// step's first pass.
     pub gather_phase: f64,
+    /// The samplers' work after a sampled step ...
+    pub sampling: f64,
 }
 
 /// Run-time guards: stop with a clear error instead of writing NaN.
@@ -588,39 +590,60 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         while k < n {
             // steps to the next sampled one (u64::MAX without samplers)
             let to_sample = crate::sampling::steps_to_next(&self.samplers, self.step);
-            if to_sample == 1 {
-                // its evaluation keeps the contact records if a due sampler reads them; the
-                // step is completed (no pass deferred): the samplers read full-step velocities
-                let step = self.step + 1;
-                self.want_records = self
-                    .samplers
+            let left = n - k;
+            // a sampled step's evaluation keeps the contact records if a due sampler reads
+            // them, and the step is completed (no pass deferred): the samplers read
+            // full-step velocities
+            let records = to_sample <= left && {
+                let step = self.step + to_sample;
+                self.samplers
                     .iter()
-                    .any(|s| step.is_multiple_of(s.every()) && s.needs_contacts());
-                self.step_once(false)?;
-                k += 1;
-                self.sample()?;
-                continue;
-            }
-            // plain steps that need nothing but forces run in one team of threads (the team
-            // stops before a sampled step)
-            let budget = self.team_budget(n - k).min(to_sample - 1);
+                    .any(|s| step.is_multiple_of(s.every()) && s.needs_contacts())
+            };
+            // plain steps that need nothing but forces run in one team of threads; a stint
+            // may end with the sampled step, completed in the team
+            let to_check = self.steps_to_check();
+            let (budget, complete) = if to_sample <= left && to_sample <= to_check + 1 {
+                (to_sample, true)
+            } else {
+                ((left - 1).min(to_check).min(to_sample - 1), false)
+            };
             if budget > 0 && self.team_ready() {
-                if let Some((done, exit)) = self.team_steps(budget) {
+                if let Some((done, exit)) = self.team_steps(budget, complete, records) {
                     k += done;
                     match exit {
-                        TeamExit::Done => {}
+                        TeamExit::Done => {
+                            if complete && done == budget {
+                                self.after_step_checks()?;
+                                self.sample()?;
+                            }
+                        }
                         TeamExit::Overlap => {
                             let r = self.check_overlap();
                             self.complete_step();
                             return r;
                         }
                         TeamExit::Outside { moved } => {
-                            self.step_finish(moved, true, k + 1 < n, Instant::now())?;
+                            // the step the stint left inside, finished here (the sampled one:
+                            // with its records, completed)
+                            let sampled = complete && done + 1 == budget;
+                            self.want_records = sampled && records;
+                            self.step_finish(moved, true, !sampled && k + 1 < n, Instant::now())?;
                             k += 1;
+                            if sampled {
+                                self.sample()?;
+                            }
                         }
                     }
                     continue;
                 }
+            }
+            if to_sample == 1 {
+                self.want_records = records;
+                self.step_once(false)?;
+                k += 1;
+                self.sample()?;
+                continue;
             }
             self.step_once(k + 1 < n)?;
             k += 1;
@@ -628,8 +651,37 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         Ok(())
     }
 
+    /// Steps before the next one whose end has a guard check (0: the next step has one).
+    fn steps_to_check(&self) -> u64 {
+        let ce = self.guards.check_every;
+        if ce == 0 {
+            u64::MAX
+        } else {
+            (ce - (self.step + 1) % ce) % ce
+        }
+    }
+
+    /// The guard checks due after the step just completed (every `check_every` steps).
+    fn after_step_checks(&mut self) -> Result<()> {
+        if self.step.is_multiple_of(self.guards.check_every) {
+            self.check_finite()?;
+            if D::CLOSED && !G::ON {
+                self.check_energy()?;
+            }
+        }
+        Ok(())
+    }
+
     /// Hand the state after a sampled step to the samplers due at this step.
     fn sample(&mut self) -> Result<()> {
+        let t0 = Instant::now();
+        let r = self.sample_due();
+        self.timers.sampling += t0.elapsed().as_secs_f64();
+        r
+    }
+
+    /// `sample` without its timer.
+    fn sample_due(&mut self) -> Result<()> {
         let nw = self.walls.planes().len();
         let step = self.step;
         let elastic = self
@@ -682,18 +734,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
         }
         self.samplers.push(s);
         Ok(())
-    }
-
-    /// How many of the next `left` steps of a run a team may take: each must be followed by
-    /// another step of the run and have no guard check due (see `step_once`).
-    fn team_budget(&self, left: u64) -> u64 {
-        let ce = self.guards.check_every;
-        let to_check = if ce == 0 {
-            u64::MAX
-        } else {
-            (ce - (self.step + 1) % ce) % ce
-        };
-        (left - 1).min(to_check)
     }
 
     /// One step. `more`: another step of the same `run` follows, so (plain NVE, no
@@ -773,13 +813,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             self.complete_step();
             return Err(e);
         }
-        if self.step.is_multiple_of(self.guards.check_every) {
-            self.check_finite()?;
-            if D::CLOSED && !G::ON {
-                self.check_energy()?;
-            }
-        }
-        Ok(())
+        self.after_step_checks()
     }
 }
 

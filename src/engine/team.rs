@@ -33,7 +33,7 @@
 
 use super::chunk::{self, ChunkIo, ChunkOut, Shared};
 use super::forces::{inner_skin_for, reduce_outs};
-use super::integrate::{list_speed, Drift, KickOut, KickPass};
+use super::integrate::{finish_chunk, list_speed, Drift, KickOut, KickPass};
 use super::*;
 use crate::neighbor::image_shifts;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -248,9 +248,18 @@ where
     }
 
     /// Up to `budget` plain steps (each followed by another step of the same run, none with
-    /// a guard check due) in one team. Returns the steps completed and how the stint ended;
-    /// `None` when another team holds the process's team (step the usual way).
-    pub(super) fn team_steps(&mut self, budget: u64) -> Option<(u64, TeamExit)> {
+    /// a guard check due) in one team. With `complete`, the last of them is a sampled step:
+    /// it is completed in the team (its cross pass and final half-kick done, nothing
+    /// deferred), its evaluation keeping the contact records if `records`, and it may be the
+    /// run's last or have a guard check due (the caller checks). Returns the steps done and
+    /// how the stint ended; `None` when another team holds the process's team (step the
+    /// usual way).
+    pub(super) fn team_steps(
+        &mut self,
+        budget: u64,
+        complete: bool,
+        records: bool,
+    ) -> Option<(u64, TeamExit)> {
         let _guard = match TEAM.try_lock() {
             Ok(g) => g,
             Err(TryLockError::Poisoned(e)) => e.into_inner(),
@@ -305,7 +314,7 @@ where
         ];
         let pcross = Ptr(self.cross.as_mut_ptr());
         let pcstat = Ptr(self.cross_stats.as_mut_ptr());
-        // (a team step keeps no statistics: the contact records are never written)
+        // (written only by a completed last step that keeps the contact records)
         let pcrec = Ptr(self.crecs.as_mut_ptr());
         // room for the cross index of a prune inside the team (it must not move: every
         // thread holds its address); a prune that needs more is done outside
@@ -338,6 +347,8 @@ where
         let kick_claims = Claims::new(nkp, KICK_SPLIT, threads);
         let chunk_claims = Claims::new(nch, 1, threads);
         let prune_claims = Claims::new(nch, 1, threads);
+        let finish_claims = Claims::new(nch, 1, threads);
+        let (pv_all, pw_all) = (pv, pw);
         // per thread its drift of the pass, per chunk its report (each written by one thread
         // in a pass, read by all after the barrier); two sets, by the parity of the step: a
         // fused step has no barrier between reading one step's and writing the next one's (a
@@ -364,7 +375,7 @@ where
             let mut track = track0;
             let mut pending = first_pending;
             let mut done = 0u64;
-            let mut last = None;
+            let mut last_diag = None;
             // fused sweeps done (the same count on every thread: they decide alike)
             let mut fpass = 0usize;
             loop {
@@ -409,7 +420,10 @@ where
                     };
                     pass.piece::<T>(r.start, o)
                 };
-                // chunk c's forces (pass 2), its report into outs[c]
+                // the last step of a stint that completes it (a sampled step)
+                let last = complete && done + 1 == budget;
+                // chunk c's forces (pass 2), its report into outs[c]; the contact records kept
+                // when the completed last step wants them
                 let force_chunk = |c: usize, shared: &Shared<F, T, D>, nl: &NeighborList| {
                     let r = c * ch..((c + 1) * ch).min(n);
                     let (c0, c1) = (nl.cross_off[c] as usize, nl.cross_off[c + 1] as usize);
@@ -429,7 +443,11 @@ where
                             ps: &mut [],
                             crec: &mut *pcrec.get().add(c),
                         };
-                        chunk::chunk::<F, T, D, W, G, false, false>(shared, c, io)
+                        if last && records {
+                            chunk::chunk::<F, T, D, W, G, true, false>(shared, c, io)
+                        } else {
+                            chunk::chunk::<F, T, D, W, G, false, false>(shared, c, io)
+                        }
                     };
                     // SAFETY: chunk c's report is written by the thread that took it
                     unsafe { *pouts.0.add(par * nch + c) = o };
@@ -438,6 +456,7 @@ where
                 // would be computed for nothing): judged on the last step's drift speed with a
                 // margin (a misjudged step is still right, only slower)
                 let fuse = fused
+                    && !last
                     && track.due_after(nl, nl.step_drift(margin * track.vmax2.sqrt(), dt))
                         == (false, false);
                 if fuse {
@@ -511,7 +530,7 @@ where
                 {
                     // (a fused sweep computed this step's forces with lists now out of
                     // date: they are computed again outside, from the records)
-                    return (done, track, TeamExit::Outside { moved }, last);
+                    return (done, track, TeamExit::Outside { moved }, last_diag);
                 }
                 let nl = if prune_here {
                     // `Engine::prune` (same inner skin, same chunks), its chunks shared out
@@ -533,7 +552,7 @@ where
                         // (the cross index would move: the step's prune is done again outside,
                         // from the same records, to the same chunks; no thread writes the
                         // lists before then)
-                        return (done, track, TeamExit::Outside { moved }, last);
+                        return (done, track, TeamExit::Outside { moved }, last_diag);
                     }
                     barrier.wait();
                     if me == 0 {
@@ -565,6 +584,36 @@ where
                     }
                     barrier.wait();
                 }
+                if last {
+                    // complete the step: the cross pass and final half-kick (as `cross_pass`),
+                    // chunk by chunk; the forces, velocities and spins are then full-step
+                    // SAFETY: the forces' cross buffers and index are only read; each chunk is
+                    // claimed once and writes only its own particles
+                    let bufs = unsafe {
+                        (
+                            pcross.slice(0..nch),
+                            pcstat.slice(0..nch),
+                            pcidx.slice(0..nl.n_cross()),
+                        )
+                    };
+                    for c in finish_claims.take(me, pass_no) {
+                        let r = c * ch..((c + 1) * ch).min(n);
+                        // SAFETY: chunk c is this thread's alone in this pass
+                        unsafe {
+                            finish_chunk::<T>(
+                                nl,
+                                bufs,
+                                (rad, im, ii),
+                                r.clone(),
+                                h,
+                                (pf.slice_mut(r.clone()), pt.slice_mut(r.clone())),
+                                pv_all.slice_mut(r.clone()),
+                                pw_all.slice_mut(r),
+                            )
+                        };
+                    }
+                    barrier.wait();
+                }
                 done += 1;
                 // SAFETY: as for the drifts
                 let diag = reduce_outs(unsafe { pouts.slice(par * nch..(par + 1) * nch) });
@@ -580,25 +629,28 @@ where
                     }
                     if W::ON {
                         // from the wall forces of the last step (before the team's first)
-                        let old = last.as_ref().map_or(&wf0, |d: &StepDiag| &d.wall_force);
+                        let old = last_diag
+                            .as_ref()
+                            .map_or(&wf0, |d: &StepDiag| &d.wall_force);
                         add_wall_impulse(&mut wall_sum.lock().unwrap(), old, &diag.wall_force, dt);
                     }
                 }
                 let bad = guards.overlap_exceeded(&diag);
-                last = Some(diag);
+                last_diag = Some(diag);
                 if bad || done == budget {
                     let exit = if bad {
                         TeamExit::Overlap
                     } else {
                         TeamExit::Done
                     };
-                    return (done, track, exit, last);
+                    return (done, track, exit, last_diag);
                 }
             }
         });
 
         // every thread ended at the same step for the same reason; the first one's account
-        let (done, track, exit, last) = results.into_iter().next().expect("a team of one or more");
+        let (done, track, exit, last_diag) =
+            results.into_iter().next().expect("a team of one or more");
         let pruned = pruned.into_inner() as u64;
         self.team_prunes += pruned;
         if pruned > 0 && self.trim() > RELEASE_BYTES {
@@ -609,14 +661,15 @@ where
             std::mem::swap(&mut self.hist, &mut self.hist_next);
             std::mem::swap(&mut self.whist, &mut self.whist_next);
         }
-        if let Some(d) = last {
+        if let Some(d) = last_diag {
             self.diag = d;
         }
         // a stint that ends inside a step has done that step's first pass, which took the
-        // pending cross pass; otherwise the last step's is pending
+        // pending cross pass; one that completed its last step has nothing pending;
+        // otherwise the last step's cross pass is pending
         self.cross_pending = match exit {
             TeamExit::Outside { .. } => false,
-            TeamExit::Done | TeamExit::Overlap => true,
+            TeamExit::Done | TeamExit::Overlap => !(complete && done == budget),
         };
         self.wall_impulse = wall_sum.into_inner().unwrap();
         let (ti, tf) = leader.into_inner().unwrap();

@@ -33,10 +33,20 @@ const IWW: usize = 19;
 const SC: usize = 20;
 const P: usize = 29;
 const NACC: usize = 30;
+/// The particle terms' part of the layout (COUNT ..= IWW).
+const ROW: usize = 20;
 
 /// Volume of a sphere of radius r lying below a plane at signed height z above its centre.
+#[inline(always)]
 fn cap_below(z: f64, r: f64) -> f64 {
-    let zc = z.clamp(-r, r);
+    // (`clamp` without its check that -r <= r: NaN stays NaN, as with clamp)
+    let zc = if z < -r {
+        -r
+    } else if z > r {
+        r
+    } else {
+        z
+    };
     let a = r + zc;
     a * a * (3.0 * r - a) * (PI / 3.0)
 }
@@ -96,7 +106,21 @@ impl Lookup {
         k
     }
 
+    /// The bins from `lo`'s to `hi`'s, walked from bin `b` (which holds a point between).
+    fn reach(&self, b: usize, lo: f64, hi: f64) -> (usize, usize) {
+        let (e, nb) = (&self.edges, self.edges.len() - 1);
+        let (mut k0, mut k1) = (b, b);
+        while k0 > 0 && lo < e[k0] {
+            k0 -= 1;
+        }
+        while k1 + 1 < nb && hi >= e[k1 + 1] {
+            k1 += 1;
+        }
+        (k0, k1)
+    }
+
     /// One chunk's sums: its particles `r` and its contacts `recs`.
+    #[inline(always)]
     fn sums(
         &self,
         v: &SampleView,
@@ -120,45 +144,48 @@ impl Lookup {
             let inertia = m * dia * dia * 0.1;
             let b = self.bin(x.x);
             bins.push(b as u32);
-            let a = &mut acc[b];
-            a[COUNT] += 1.0;
-            a[M] += m;
+            // the particle's terms as one row (zeros where it adds nothing: the volume, the
+            // kinetic sums' lower triangle, filled in when the window closes), added whole
+            let mut row = [0.0; ROW];
+            row[COUNT] = 1.0;
+            row[M] = m;
             for k in 0..3 {
-                a[MV + k] += m * vi[k];
-                a[IW + k] += inertia * w[k];
+                row[MV + k] = m * vi[k];
+                row[IW + k] = inertia * w[k];
             }
-            // the upper triangle (the lower one is filled in when the window closes)
             for ka in 0..3 {
                 for kb in ka..3 {
-                    a[MVV + 3 * ka + kb] += m * vi[ka] * vi[kb];
+                    row[MVV + 3 * ka + kb] = m * vi[ka] * vi[kb];
                 }
             }
-            a[IN] += inertia;
-            a[IWW] += inertia * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
-            // the sphere's volume in each slab it reaches: the caps below the edges it
-            // crosses (an edge beyond its reach cuts off nothing or the whole sphere)
+            row[IN] = inertia;
+            row[IWW] = inertia * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+            for (x, y) in acc[b][..ROW].iter_mut().zip(&row) {
+                *x += y;
+            }
+            // the sphere's volume in each slab it reaches, as differences of the caps below
+            // the slab's edges (`cap_below` clamps: 0 below the sphere, all of it above).
+            // Usually it reaches at most the bins beside its own: the caps below its bin's
+            // two edges give all three (a bin beside it that it does not reach gets +0);
+            // else a walk over the bins.
             let (lo, hi) = (x.x - rad, x.x + rad);
-            let (mut k0, mut k1) = (b, b);
-            while k0 > 0 && lo < edges[k0] {
-                k0 -= 1;
-            }
-            while k1 + 1 < nb && hi >= edges[k1 + 1] {
-                k1 += 1;
-            }
-            let whole = cap_below(rad, rad);
-            let cut = |e: f64| {
-                let z = e - x.x;
-                if z <= -rad {
-                    0.0
-                } else if z >= rad {
-                    whole
-                } else {
-                    cap_below(z, rad)
+            if (b == 0 || lo >= edges[b - 1]) && (b + 2 > nb || hi < edges[b + 2]) {
+                let whole = cap_below(rad, rad);
+                let c_lo = cap_below(edges[b] - x.x, rad);
+                let c_hi = cap_below(edges[b + 1] - x.x, rad);
+                if b > 0 {
+                    acc[b - 1][VOL] += c_lo;
                 }
-            };
-            let mut prev = cut(edges[k0]);
+                acc[b][VOL] += c_hi - c_lo;
+                if b + 1 < nb {
+                    acc[b + 1][VOL] += whole - c_hi;
+                }
+                continue;
+            }
+            let (k0, k1) = self.reach(b, lo, hi);
+            let mut prev = cap_below(edges[k0] - x.x, rad);
             for (k, slab) in acc.iter_mut().enumerate().take(k1 + 1).skip(k0) {
-                let next = cut(edges[k + 1]);
+                let next = cap_below(edges[k + 1] - x.x, rad);
                 slab[VOL] += next - prev;
                 prev = next;
             }
@@ -183,22 +210,50 @@ impl Lookup {
                 a[P] += c.power;
                 continue;
             }
-            // the bins from x_i's to x_j's, searched from x_i's
+            // the segment from x_i to x_j: usually within x_i's bin and the two beside it
             let xj = xi - d[0];
             let (lo, hi) = (xi.min(xj), xi.max(xj));
-            let (mut k0, mut k1) = (bi, bi);
-            while k0 > 0 && lo < edges[k0] {
-                k0 -= 1;
-            }
-            while k1 + 1 < nb && hi >= edges[k1 + 1] {
-                k1 += 1;
-            }
+            let (kl, kh) = (bi.saturating_sub(1), (bi + 1).min(nb - 1));
+            let span = hi - lo;
+            let inv = 1.0 / span;
             // the power half and half, to the bins of the two centres (x_j's bin from the
             // branch vector: no walk to particle j; the channel is not periodic across x)
             let half = 0.5 * c.power;
+            if lo >= edges[kl] && hi < edges[kh + 1] {
+                // the segment's end bins (it starts in bin bi)
+                let k0 = if bi > 0 && lo < edges[bi] { bi - 1 } else { bi };
+                let k1 = if bi + 1 < nb && hi >= edges[bi + 1] {
+                    bi + 1
+                } else {
+                    bi
+                };
+                acc[bi][P] += half;
+                acc[if xj < xi { k0 } else { k1 }][P] += half;
+                // a segment in one bin (or too short to split) gives all of it to that bin
+                // (share exactly 1); else each bin its length inside; a bin of the three
+                // it does not reach gets +-0 (no change)
+                let whole = k0 == k1 || span < 1e-12;
+                for k in kl..=kh {
+                    let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
+                    let share = if whole {
+                        if k == k0 {
+                            1.0
+                        } else {
+                            0.0
+                        }
+                    } else {
+                        ov.max(0.0) * inv
+                    };
+                    let a = &mut acc[k];
+                    for q in 0..9 {
+                        a[SC + q] += share * full[q];
+                    }
+                }
+                continue;
+            }
+            let (k0, k1) = self.reach(bi, lo, hi);
             acc[bi][P] += half;
             acc[if xj < xi { k0 } else { k1 }][P] += half;
-            let span = hi - lo;
             if k0 == k1 || span < 1e-12 {
                 let a = &mut acc[k0];
                 for q in 0..9 {
@@ -206,7 +261,6 @@ impl Lookup {
                 }
                 continue;
             }
-            let inv = 1.0 / span;
             for k in k0..=k1 {
                 let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
                 let share = ov.max(0.0) * inv;
@@ -217,6 +271,22 @@ impl Lookup {
             }
         }
         acc
+    }
+}
+
+/// One chunk's sums as a pass with an AVX2 twin (the same operations, compiled wider).
+struct ChunkSums<'a, 'b>(
+    &'a Lookup,
+    &'a SampleView<'b>,
+    std::ops::Range<usize>,
+    &'a [ContactRec],
+);
+
+impl crate::engine::simd::Twin for ChunkSums<'_, '_> {
+    type Out = Vec<[f64; NACC]>;
+    #[inline(always)]
+    fn base(self) -> Self::Out {
+        self.0.sums(self.1, self.2, self.3)
     }
 }
 
@@ -312,7 +382,7 @@ impl Bins {
             .map(|c| {
                 let r = (c * ch).min(n)..((c + 1) * ch).min(n);
                 let recs = v.contacts.get(c).map_or(&[][..], |x| &x[..]);
-                lookup.sums(v, r, recs)
+                crate::engine::simd::dispatch(ChunkSums(lookup, v, r, recs))
             })
             .collect();
         for part in parts {
@@ -572,6 +642,10 @@ impl Sampler for Series {
     fn kind(&self) -> &'static str {
         "channel_series"
     }
+    fn needs_contacts(&self) -> bool {
+        // (its contact count and largest overlap are the evaluation's own)
+        false
+    }
     fn table(&self) -> &'static str {
         "series"
     }
@@ -655,6 +729,238 @@ mod tests {
         }
     }
 
+    /// Random spheres (d 0.8..1.2) in a 20 x 30 x 10 channel, and `per` random contacts for
+    /// each chunk of `ch` (a tenth on walls; branch vectors of a contact's length in any
+    /// direction, some along y: no length across x).
+    fn random_state(
+        n: usize,
+        ch: usize,
+        per: usize,
+    ) -> (crate::particles::Particles, Vec<Vec<ContactRec>>) {
+        use crate::particles::Particles;
+        use crate::V3;
+        let mut rng = crate::rng::Rng::new(7);
+        let x: Vec<V3> = (0..n)
+            .map(|_| {
+                V3::new(
+                    20.0 * rng.uniform(),
+                    30.0 * rng.uniform(),
+                    10.0 * rng.uniform(),
+                )
+            })
+            .collect();
+        let d: Vec<f64> = (0..n).map(|_| 0.8 + 0.4 * rng.uniform()).collect();
+        let mut p = Particles::new(x, &d, 1.0).unwrap();
+        for i in 0..n {
+            p.v[i] = V3::new(
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+                rng.uniform() - 0.5,
+            );
+            p.omega[i] = V3::new(rng.uniform(), rng.uniform(), rng.uniform());
+        }
+        let recs = (0..n.div_ceil(ch))
+            .map(|c| {
+                let len = ch.min(n - c * ch);
+                (0..per)
+                    .map(|k| {
+                        let i = c * ch + (k * 7) % len;
+                        let wall = rng.uniform() < 0.1;
+                        let u = V3::new(
+                            rng.uniform() - 0.5,
+                            rng.uniform() - 0.5,
+                            rng.uniform() - 0.5,
+                        );
+                        let dv = if k % 97 == 0 {
+                            V3::new(0.0, 1.0, 0.0)
+                        } else {
+                            u.normalize() * (0.5 + 0.6 * rng.uniform())
+                        };
+                        ContactRec {
+                            i: i as u32,
+                            j: if wall { WALL } else { ((i + 1) % n) as u32 },
+                            d: dv,
+                            f: V3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform()),
+                            power: -rng.uniform(),
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        (p, recs)
+    }
+
+    fn view_of<'a>(
+        p: &'a crate::particles::Particles,
+        recs: &'a [Vec<ContactRec>],
+    ) -> SampleView<'a> {
+        const WF: [crate::V3; 2] = [crate::V3::new(0.0, 0.0, 0.0); 2];
+        SampleView {
+            step: 1,
+            time: 0.0,
+            p,
+            contacts: recs,
+            n_contacts: 0,
+            max_overlap: 0.0,
+            wall_force: &WF,
+            wall_impulse: &WF,
+            h: crate::M3::identity(),
+            widths: [20.0, 30.0, 10.0],
+            observables: vec![],
+            elastic: None,
+        }
+    }
+
+    /// The new sums give the bits of the walking version they replaced, on random spheres and
+    /// contacts over uniform bins with wall bins, narrow bins (spheres over four bins: the
+    /// walk), and uneven bins.
+    #[test]
+    fn sums_keep_their_bits() {
+        let (n, ch) = (3000, 750);
+        let (p, recs) = random_state(n, ch, 1100);
+        let view = view_of(&p, &recs);
+        let mut uniform = vec![0.0, 1.5];
+        uniform.extend((1..18).map(|k| 1.5 + k as f64));
+        uniform.push(20.0);
+        let narrow: Vec<f64> = (0..=64).map(|k| k as f64 * 20.0 / 64.0).collect();
+        let uneven = [0.0, 0.7, 3.1, 3.2, 9.0, 9.4, 15.0, 20.0];
+        for e in [&uniform[..], &narrow[..], &uneven[..], &[0.0, 20.0][..]] {
+            let l = Lookup::new(e);
+            for (c, rc) in recs.iter().enumerate() {
+                let r = c * ch..(c + 1) * ch;
+                let (a, b) = (l.sums(&view, r.clone(), rc), sums_before(&l, &view, r, rc));
+                for (x, y) in a.iter().zip(&b) {
+                    for (u, w) in x.iter().zip(y) {
+                        assert!(u == w, "edges {e:?}: {u:e} != {w:e}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The sums as first written (walks and branches): the reference of `sums`' bits.
+    fn sums_before(
+        l: &Lookup,
+        v: &SampleView,
+        r: std::ops::Range<usize>,
+        recs: &[ContactRec],
+    ) -> Vec<[f64; NACC]> {
+        let p = v.p;
+        let edges = &l.edges;
+        let nb = edges.len() - 1;
+        let mut acc = vec![[0.0; NACC]; nb];
+        // each particle's bin, for its contacts
+        let r0 = r.start;
+        let mut bins: Vec<u32> = Vec::with_capacity(r.len());
+        for i in r {
+            let x = p.x[i];
+            let rad = p.radius[i];
+            let m = p.mass[i];
+            let vi = [p.v[i].x, p.v[i].y, p.v[i].z];
+            let w = [p.omega[i].x, p.omega[i].y, p.omega[i].z];
+            let dia = 2.0 * rad;
+            let inertia = m * dia * dia * 0.1;
+            let b = l.bin(x.x);
+            bins.push(b as u32);
+            let a = &mut acc[b];
+            a[COUNT] += 1.0;
+            a[M] += m;
+            for k in 0..3 {
+                a[MV + k] += m * vi[k];
+                a[IW + k] += inertia * w[k];
+            }
+            // the upper triangle (the lower one is filled in when the window closes)
+            for ka in 0..3 {
+                for kb in ka..3 {
+                    a[MVV + 3 * ka + kb] += m * vi[ka] * vi[kb];
+                }
+            }
+            a[IN] += inertia;
+            a[IWW] += inertia * (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+            // the sphere's volume in each slab it reaches: the caps below the edges it
+            // crosses (an edge beyond its reach cuts off nothing or the whole sphere)
+            let (lo, hi) = (x.x - rad, x.x + rad);
+            let (mut k0, mut k1) = (b, b);
+            while k0 > 0 && lo < edges[k0] {
+                k0 -= 1;
+            }
+            while k1 + 1 < nb && hi >= edges[k1 + 1] {
+                k1 += 1;
+            }
+            let whole = cap_below(rad, rad);
+            let cut = |e: f64| {
+                let z = e - x.x;
+                if z <= -rad {
+                    0.0
+                } else if z >= rad {
+                    whole
+                } else {
+                    cap_below(z, rad)
+                }
+            };
+            let mut prev = cut(edges[k0]);
+            for (k, slab) in acc.iter_mut().enumerate().take(k1 + 1).skip(k0) {
+                let next = cut(edges[k + 1]);
+                slab[VOL] += next - prev;
+                prev = next;
+            }
+        }
+        // contact stress: walls in their particle's bin, pairs along their branch vectors
+        for c in recs {
+            let d = [c.d.x, c.d.y, c.d.z];
+            let f = [c.f.x, c.f.y, c.f.z];
+            let full: [f64; 9] = std::array::from_fn(|k| d[k / 3] * f[k % 3]);
+            let ii = c.i as usize;
+            let xi = p.x[ii].x;
+            // (a chunk's records are its own particles'; any other is looked up)
+            let bi = match ii.checked_sub(r0).and_then(|k| bins.get(k)) {
+                Some(&b) => b as usize,
+                None => l.bin(xi),
+            };
+            if c.j == WALL {
+                let a = &mut acc[bi];
+                for k in 0..9 {
+                    a[SC + k] += full[k];
+                }
+                a[P] += c.power;
+                continue;
+            }
+            // the bins from x_i's to x_j's, searched from x_i's
+            let xj = xi - d[0];
+            let (lo, hi) = (xi.min(xj), xi.max(xj));
+            let (mut k0, mut k1) = (bi, bi);
+            while k0 > 0 && lo < edges[k0] {
+                k0 -= 1;
+            }
+            while k1 + 1 < nb && hi >= edges[k1 + 1] {
+                k1 += 1;
+            }
+            // the power half and half, to the bins of the two centres (x_j's bin from the
+            // branch vector: no walk to particle j; the channel is not periodic across x)
+            let half = 0.5 * c.power;
+            acc[bi][P] += half;
+            acc[if xj < xi { k0 } else { k1 }][P] += half;
+            let span = hi - lo;
+            if k0 == k1 || span < 1e-12 {
+                let a = &mut acc[k0];
+                for q in 0..9 {
+                    a[SC + q] += full[q];
+                }
+                continue;
+            }
+            let inv = 1.0 / span;
+            for k in k0..=k1 {
+                let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
+                let share = ov.max(0.0) * inv;
+                let a = &mut acc[k];
+                for q in 0..9 {
+                    a[SC + q] += share * full[q];
+                }
+            }
+        }
+        acc
+    }
+
     #[test]
     fn gradient_is_numpys() {
         // numpy.gradient([1, 4, 9, 25], [0, 1, 2, 4]) = [3, 4, 6, 8]
@@ -665,75 +971,37 @@ mod tests {
         }
     }
 
-    /// Timing of one sample's sums (run by hand: `cargo test --release --lib sums_timing --
-    /// --ignored --nocapture`).
+    /// Timing of one sample's sums on random spheres and contacts as many as the study's
+    /// channel has (run by hand: `cargo test --release --lib sums_timing -- --ignored
+    /// --nocapture`).
     #[test]
     #[ignore]
     fn sums_timing() {
-        use crate::particles::Particles;
-        use crate::V3;
-        let n = 6754;
-        let mut rng = crate::rng::Rng::new(1);
-        let x: Vec<V3> = (0..n)
-            .map(|_| {
-                V3::new(
-                    20.0 * rng.uniform(),
-                    30.0 * rng.uniform(),
-                    10.0 * rng.uniform(),
-                )
-            })
-            .collect();
-        let mut x = x;
-        x.sort_by(|a, b| a.y.partial_cmp(&b.y).unwrap());
-        let d: Vec<f64> = (0..n).map(|k| [0.9, 1.0, 1.1][k % 3]).collect();
-        let mut p = Particles::new(x, &d, 1.0).unwrap();
-        for v in p.v.iter_mut() {
-            *v = V3::new(rng.uniform(), rng.uniform(), rng.uniform());
-        }
-        let recs: Vec<Vec<ContactRec>> = (0..4)
-            .map(|c| {
-                (0..2100)
-                    .map(|k| ContactRec {
-                        i: ((c * 1689 + k % 1689) % n) as u32,
-                        j: if k % 50 == 0 { WALL } else { 5 },
-                        d: V3::new(0.6, 0.5, 0.3),
-                        f: V3::new(1.0, 2.0, 3.0),
-                        power: -0.5,
-                    })
-                    .collect()
-            })
-            .collect();
-        let wf = [V3::zeros(); 2];
-        let view = SampleView {
-            step: 1,
-            time: 0.0,
-            p: &p,
-            contacts: &recs,
-            n_contacts: 0,
-            max_overlap: 0.0,
-            wall_force: &wf,
-            wall_impulse: &wf,
-            h: crate::M3::identity(),
-            widths: [20.0, 30.0, 10.0],
-            observables: vec![],
-            elastic: None,
-        };
+        let (n, ch) = (6754, 1689);
+        let (p, recs) = random_state(n, ch, 2475);
+        let view = view_of(&p, &recs);
         let edges: Vec<f64> = (0..=20).map(|k| k as f64).collect();
         let l = Lookup::new(&edges);
-        let reps = 2000;
-        let t = std::time::Instant::now();
+        let reps = 1000;
         let mut sink = 0.0;
-        for _ in 0..reps {
-            sink += l.sums(&view, 0..n, &[])[3][0];
-        }
-        let tp = t.elapsed().as_secs_f64() / reps as f64;
-        let t = std::time::Instant::now();
-        for _ in 0..reps {
-            for (c, r) in recs.iter().enumerate() {
-                sink += l.sums(&view, c * 1689..((c + 1) * 1689).min(n), r)[3][SC];
+        let mut time = |with: bool| {
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                for (c, r) in recs.iter().enumerate() {
+                    let rc = if with { &r[..] } else { &[][..] };
+                    let part = crate::engine::simd::dispatch(ChunkSums(
+                        &l,
+                        &view,
+                        c * ch..((c + 1) * ch).min(n),
+                        rc,
+                    ));
+                    sink += part[3][SC];
+                }
             }
-        }
-        let tc = t.elapsed().as_secs_f64() / reps as f64;
+            t.elapsed().as_secs_f64() / reps as f64
+        };
+        let tp = time(false);
+        let tc = time(true);
         println!(
             "particles {:.1} us, particles and contacts {:.1} us ({sink})",
             tp * 1e6,
