@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{gas, periodic, periodic_gas, walled_channel, walled_gas, walled_state};
+use common::{gas, periodic, periodic_gas, pool, walled_channel, walled_gas, walled_state};
 use granflow::checkpoint::{Reader, Writer};
 use granflow::components::{NoBody, NoWalls};
 use granflow::contact::{Coulomb, Frictionless, Hertz, Hooke, LawSpec};
@@ -17,10 +17,7 @@ use granflow::insert::SizeDist;
 use granflow::{M3, V3};
 
 fn dense_packing_run(threads: usize) -> Vec<V3> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
+    let pool = pool(threads);
     pool.install(|| {
         let l = 12.0;
         let p = gas(

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{walled_gas, walled_state};
+use common::{pool, walled_gas, walled_state};
 use granflow::contact::Hooke;
 use granflow::V3;
 
@@ -20,10 +20,7 @@ fn team_steps_change_no_bits() {
     // Prunes due inside a stint are done by the team (`prune_in_team`), or outside when the
     // cross index has no room for them (`team_cross_room` Some(0): some of each).
     let run_with = |team: bool, threads: usize, fuse: Option<f64>, room: Option<usize>| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
+        let pool = pool(threads);
         pool.install(|| {
             let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
             s.tuning.team = team;
@@ -60,10 +57,7 @@ fn team_steps_change_no_bits() {
         assert_eq!(run(true, 2, fuse).0, want, "fused {fuse:?}");
         assert_eq!(run(true, 1, fuse).0, want, "fused {fuse:?}");
     }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
-        .build()
-        .unwrap();
+    let pool = pool(2);
     let (a, b) = pool.install(|| {
         let go = || {
             let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));

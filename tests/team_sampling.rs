@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{walled_gas, walled_state};
+use common::{pool, walled_gas, walled_state};
 use granflow::contact::Hooke;
 use granflow::V3;
 
@@ -16,10 +16,7 @@ fn sampled_steps_in_the_team_change_no_bits() {
     // with runs that end on a sampled step or just after one.
     use granflow::sampling::SamplerSpec;
     let run_with = |team: bool, threads: usize, fuse: bool| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
+        let pool = pool(threads);
         pool.install(|| {
             let mut s = walled_gas::<Hooke>(10.0, 23, 0.7, V3::new(-2.0, -1.0, 0.0));
             s.tuning.team = team;

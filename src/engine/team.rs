@@ -348,7 +348,6 @@ where
         let chunk_claims = Claims::new(nch, 1, threads);
         let prune_claims = Claims::new(nch, 1, threads);
         let finish_claims = Claims::new(nch, 1, threads);
-        let (pv_all, pw_all) = (pv, pw);
         // per thread its drift of the pass, per chunk its report (each written by one thread
         // in a pass, read by all after the barrier); two sets, by the parity of the step: a
         // fused step has no barrier between reading one step's and writing the next one's (a
@@ -607,8 +606,8 @@ where
                                 r.clone(),
                                 h,
                                 (pf.slice_mut(r.clone()), pt.slice_mut(r.clone())),
-                                pv_all.slice_mut(r.clone()),
-                                pw_all.slice_mut(r),
+                                pv.slice_mut(r.clone()),
+                                pw.slice_mut(r),
                             )
                         };
                     }

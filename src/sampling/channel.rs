@@ -211,15 +211,11 @@ impl Lookup {
                 continue;
             }
             // the segment from x_i to x_j: usually within x_i's bin and the two beside it
+            // (those three are visited, without walks), else walked
             let xj = xi - d[0];
             let (lo, hi) = (xi.min(xj), xi.max(xj));
             let (kl, kh) = (bi.saturating_sub(1), (bi + 1).min(nb - 1));
-            let span = hi - lo;
-            let inv = 1.0 / span;
-            // the power half and half, to the bins of the two centres (x_j's bin from the
-            // branch vector: no walk to particle j; the channel is not periodic across x)
-            let half = 0.5 * c.power;
-            if lo >= edges[kl] && hi < edges[kh + 1] {
+            let (k0, k1, visit) = if lo >= edges[kl] && hi < edges[kh + 1] {
                 // the segment's end bins (it starts in bin bi)
                 let k0 = if bi > 0 && lo < edges[bi] { bi - 1 } else { bi };
                 let k1 = if bi + 1 < nb && hi >= edges[bi + 1] {
@@ -227,43 +223,32 @@ impl Lookup {
                 } else {
                     bi
                 };
-                acc[bi][P] += half;
-                acc[if xj < xi { k0 } else { k1 }][P] += half;
-                // a segment in one bin (or too short to split) gives all of it to that bin
-                // (share exactly 1); else each bin its length inside; a bin of the three
-                // it does not reach gets +-0 (no change)
-                let whole = k0 == k1 || span < 1e-12;
-                for k in kl..=kh {
-                    let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
-                    let share = if whole {
-                        if k == k0 {
-                            1.0
-                        } else {
-                            0.0
-                        }
-                    } else {
-                        ov.max(0.0) * inv
-                    };
-                    let a = &mut acc[k];
-                    for q in 0..9 {
-                        a[SC + q] += share * full[q];
-                    }
-                }
-                continue;
-            }
-            let (k0, k1) = self.reach(bi, lo, hi);
+                (k0, k1, kl..=kh)
+            } else {
+                let (k0, k1) = self.reach(bi, lo, hi);
+                (k0, k1, k0..=k1)
+            };
+            // the power half and half, to the bins of the two centres (x_j's bin from the
+            // branch vector: no walk to particle j; the channel is not periodic across x)
+            let half = 0.5 * c.power;
             acc[bi][P] += half;
             acc[if xj < xi { k0 } else { k1 }][P] += half;
-            if k0 == k1 || span < 1e-12 {
-                let a = &mut acc[k0];
-                for q in 0..9 {
-                    a[SC + q] += full[q];
-                }
-                continue;
-            }
-            for k in k0..=k1 {
-                let ov = hi.min(edges[k + 1]) - lo.max(edges[k]);
-                let share = ov.max(0.0) * inv;
+            // a segment in one bin (or too short to split) gives all of it to that bin (share
+            // exactly 1); else each bin its length inside; a visited bin it does not reach
+            // gets +-0 (no change)
+            let span = hi - lo;
+            let whole = k0 == k1 || span < 1e-12;
+            let inv = 1.0 / span;
+            for k in visit {
+                let share = if whole {
+                    if k == k0 {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                } else {
+                    (hi.min(edges[k + 1]) - lo.max(edges[k])).max(0.0) * inv
+                };
                 let a = &mut acc[k];
                 for q in 0..9 {
                     a[SC + q] += share * full[q];

@@ -102,3 +102,11 @@ pub fn walled_state<F: Form>(s: &WalledGas<F>) -> (Vec<[f64; 9]>, Vec<f64>, u64)
     scalars.extend([s.time, s.diag.max_overlap, s.diag.contacts as f64]);
     (by_id, scalars, s.step)
 }
+
+/// A rayon pool of `threads` threads (a test's runs for a thread count install into it).
+pub fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+}
