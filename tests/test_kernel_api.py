@@ -88,11 +88,17 @@ def test_bad_particles():
 def test_ctrl_c_stops_between_steps_and_leaves_sim_usable(gas, make_sim):
     box, x, d, v = gas
     s = make_sim(box, x, d, v)
+    # A shell starting the suite in the background (`cmd &` without job control) hands it
+    # SIGINT ignored, and Python keeps that: install Python's own handler for this test.
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, lambda: signal.raise_signal(signal.SIGINT))
     timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        s.run(10_000_000, progress=False)
-    timer.cancel()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            s.run(10_000_000, progress=False)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, old)
     stopped = s.step
     assert 0 < stopped < 10_000_000
     assert np.isfinite(s.get_positions()).all()
