@@ -22,6 +22,15 @@ pub struct Particles {
     pub id: Vec<u32>,
 }
 
+/// Sums over the particles' motion (`Particles::motion`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Motion {
+    pub momentum: V3,
+    pub mass: f64,
+    pub translational: f64,
+    pub rotational: f64,
+}
+
 impl Particles {
     /// Build from diameters and a single density; positions given; velocities and spins zero
     /// unless set afterwards.
@@ -100,20 +109,24 @@ impl Particles {
     }
     /// Translational and rotational kinetic energy.
     pub fn kinetic_energy(&self) -> (f64, f64) {
-        let mut et = 0.0;
-        let mut er = 0.0;
-        for i in 0..self.len() {
-            et += 0.5 * self.mass[i] * self.v[i].norm_squared();
-            er += 0.5 * self.omega[i].norm_squared() / self.inv_inertia[i];
-        }
-        (et, er)
+        let m = self.motion();
+        (m.translational, m.rotational)
     }
     pub fn momentum(&self) -> V3 {
-        let mut p = V3::zeros();
+        self.motion().momentum
+    }
+
+    /// Momentum, total mass and kinetic energies in one pass (each summed in particle order,
+    /// as the separate sums would be: the same bits).
+    pub fn motion(&self) -> Motion {
+        let mut m = Motion::default();
         for i in 0..self.len() {
-            p += self.mass[i] * self.v[i];
+            m.momentum += self.mass[i] * self.v[i];
+            m.mass += self.mass[i];
+            m.translational += 0.5 * self.mass[i] * self.v[i].norm_squared();
+            m.rotational += 0.5 * self.omega[i].norm_squared() / self.inv_inertia[i];
         }
-        p
+        m
     }
 
     /// Apply a permutation: new[k] = old[perm[k]].

@@ -5,7 +5,6 @@ use super::{Body, Engine, Walls};
 use crate::contact::{Form, Friction};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use rayon::prelude::*;
 
 impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W, G> {
     pub(super) fn check_overlap(&self) -> Result<()> {
@@ -65,17 +64,23 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     }
 
     pub fn check_finite(&self) -> Result<()> {
-        let bad = self
-            .p
-            .x
-            .par_iter()
-            .zip(self.p.v.par_iter())
-            .zip(self.p.omega.par_iter())
-            .position_first(|((x, v), w)| {
-                !(x.iter().all(|c| c.is_finite())
-                    && v.iter().all(|c| c.is_finite())
-                    && w.iter().all(|c| c.is_finite()))
-            });
+        let p = &self.p;
+        // one branch-free pass (vectorised; a parallel search cost ~0.1 ms a check in rayon's
+        // splitting at 7k particles), then the first bad particle only if there is one
+        let finite = |a: &[crate::V3]| {
+            a.iter().fold(true, |ok, c| {
+                ok & c.x.is_finite() & c.y.is_finite() & c.z.is_finite()
+            })
+        };
+        let bad = if finite(&p.x) && finite(&p.v) && finite(&p.omega) {
+            None
+        } else {
+            (0..p.len()).find(|&i| {
+                !(p.x[i].iter().all(|c| c.is_finite())
+                    && p.v[i].iter().all(|c| c.is_finite())
+                    && p.omega[i].iter().all(|c| c.is_finite()))
+            })
+        };
         if let Some(i) = bad {
             return Err(Error::Instability {
                 step: self.step,

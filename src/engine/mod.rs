@@ -209,6 +209,9 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub(crate) crecs: Vec<Vec<ContactRec>>,
     /// Statistics taken inside the step loop on their triggers (`crate::sampling`).
     pub samplers: Vec<Box<dyn Sampler>>,
+    /// Chunk sums the team made for a sampled step (`Sampler::chunk_part`): the step, the
+    /// sampler's index and its parts in chunk order; taken by that step's `sample`.
+    chunk_parts: Vec<(u64, usize, Vec<Vec<f64>>)>,
     /// Total energy at the first guard check (closed systems only).
     energy_ref: Option<f64>,
     forces_valid: bool,
@@ -329,6 +332,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross_stats: Vec::new(),
             crecs: Vec::new(),
             samplers: Vec::new(),
+            chunk_parts: Vec::new(),
             energy_ref: None,
             forces_valid: false,
             tuning: Tuning::default(),
@@ -703,8 +707,12 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             observables: self.domain.observables(),
             elastic,
         };
-        for s in self.samplers.iter_mut() {
+        let mut parts = std::mem::take(&mut self.chunk_parts);
+        for (si, s) in self.samplers.iter_mut().enumerate() {
             if step.is_multiple_of(s.every()) {
+                if let Some(k) = parts.iter().position(|q| q.0 == step && q.1 == si) {
+                    s.set_parts(parts.swap_remove(k).2);
+                }
                 s.sample(&view)?;
             }
         }

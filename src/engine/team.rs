@@ -36,6 +36,7 @@ use super::forces::{inner_skin_for, reduce_outs};
 use super::integrate::{finish_chunk, list_speed, Drift, KickOut, KickPass};
 use super::*;
 use crate::neighbor::image_shifts;
+use crate::sampling::ChunkView;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, TryLockError};
 
@@ -281,6 +282,18 @@ where
             vmax2: self.vmax2,
         };
         let wf0 = self.diag.wall_force;
+        // the samplers due at a completed last step, whose chunk sums the team makes as it
+        // completes the chunks (one slot per sampler and chunk)
+        let samplers = &self.samplers;
+        let due: Vec<usize> = if complete {
+            let at = step0 + budget;
+            (0..samplers.len())
+                .filter(|&k| at.is_multiple_of(samplers[k].every()))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        self.chunk_parts.clear();
 
         // what the passes write, as shared pointers; what they only read, as references
         let Particles {
@@ -348,6 +361,8 @@ where
         let chunk_claims = Claims::new(nch, 1, threads);
         let prune_claims = Claims::new(nch, 1, threads);
         let finish_claims = Claims::new(nch, 1, threads);
+        let mut parts: Vec<Option<Vec<f64>>> = vec![None; due.len() * nch];
+        let pparts = Ptr(parts.as_mut_ptr());
         // per thread its drift of the pass, per chunk its report (each written by one thread
         // in a pass, read by all after the barrier); two sets, by the parity of the step: a
         // fused step has no barrier between reading one step's and writing the next one's (a
@@ -607,9 +622,31 @@ where
                                 h,
                                 (pf.slice_mut(r.clone()), pt.slice_mut(r.clone())),
                                 pv.slice_mut(r.clone()),
-                                pw.slice_mut(r),
+                                pw.slice_mut(r.clone()),
                             )
                         };
+                        if due.is_empty() {
+                            continue;
+                        }
+                        // the due samplers' sums over the chunk, while it is in cache
+                        // SAFETY: no thread writes positions in this pass; the chunk's
+                        // velocities and spins are this thread's, completed just above; its
+                        // records were written in the force pass; each slot is this chunk's
+                        let cv = unsafe {
+                            ChunkView {
+                                x: px.slice(0..n),
+                                radius: rad,
+                                mass,
+                                v: pv.slice(r.clone()),
+                                omega: pw.slice(r.clone()),
+                                recs: if records { &*pcrec.get().add(c) } else { &[] },
+                                r,
+                            }
+                        };
+                        for (k, &si) in due.iter().enumerate() {
+                            let part = samplers[si].chunk_part(&cv);
+                            unsafe { *pparts.get().add(k * nch + c) = part };
+                        }
                     }
                     barrier.wait();
                 }
@@ -662,6 +699,18 @@ where
         }
         if let Some(d) = last_diag {
             self.diag = d;
+        }
+        if complete && done == budget {
+            // (a sampler's parts only when it gave one for every chunk)
+            for (k, &si) in due.iter().enumerate() {
+                let mine: Option<Vec<Vec<f64>>> = parts[k * nch..(k + 1) * nch]
+                    .iter_mut()
+                    .map(Option::take)
+                    .collect();
+                if let Some(mine) = mine {
+                    self.chunk_parts.push((step0 + budget, si, mine));
+                }
+            }
         }
         // a stint that ends inside a step has done that step's first pass, which took the
         // pending cross pass; one that completed its last step has nothing pending;

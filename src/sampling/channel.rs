@@ -12,7 +12,7 @@
 //! contact's power split half and half (walls in full).
 
 use super::{
-    check_finite, check_window, ContactRec, Rows, SampleView, Sampler, SamplerSpec, Setup, WALL,
+    check_finite, check_window, ChunkView, Rows, SampleView, Sampler, SamplerSpec, Setup, WALL,
 };
 use crate::error::{Error, Result};
 use crate::table::Table;
@@ -119,15 +119,10 @@ impl Lookup {
         (k0, k1)
     }
 
-    /// One chunk's sums: its particles `r` and its contacts `recs`.
+    /// One chunk's sums: its particles and its contacts.
     #[inline(always)]
-    fn sums(
-        &self,
-        v: &SampleView,
-        r: std::ops::Range<usize>,
-        recs: &[ContactRec],
-    ) -> Vec<[f64; NACC]> {
-        let p = v.p;
+    fn sums(&self, c: &ChunkView) -> Vec<[f64; NACC]> {
+        let (r, recs) = (c.r.clone(), c.recs);
         let edges = &self.edges;
         let nb = edges.len() - 1;
         let mut acc = vec![[0.0; NACC]; nb];
@@ -135,11 +130,12 @@ impl Lookup {
         let r0 = r.start;
         let mut bins: Vec<u32> = Vec::with_capacity(r.len());
         for i in r {
-            let x = p.x[i];
-            let rad = p.radius[i];
-            let m = p.mass[i];
-            let vi = [p.v[i].x, p.v[i].y, p.v[i].z];
-            let w = [p.omega[i].x, p.omega[i].y, p.omega[i].z];
+            let x = c.x[i];
+            let rad = c.radius[i];
+            let m = c.mass[i];
+            let (vi, w) = (c.v[i - r0], c.omega[i - r0]);
+            let vi = [vi.x, vi.y, vi.z];
+            let w = [w.x, w.y, w.z];
             let dia = 2.0 * rad;
             let inertia = m * dia * dia * 0.1;
             let b = self.bin(x.x);
@@ -191,64 +187,61 @@ impl Lookup {
             }
         }
         // contact stress: walls in their particle's bin, pairs along their branch vectors
-        for c in recs {
-            let d = [c.d.x, c.d.y, c.d.z];
-            let f = [c.f.x, c.f.y, c.f.z];
+        for rec in recs {
+            let d = [rec.d.x, rec.d.y, rec.d.z];
+            let f = [rec.f.x, rec.f.y, rec.f.z];
             let full: [f64; 9] = std::array::from_fn(|k| d[k / 3] * f[k % 3]);
-            let ii = c.i as usize;
-            let xi = p.x[ii].x;
+            let ii = rec.i as usize;
+            let xi = c.x[ii].x;
             // (a chunk's records are its own particles'; any other is looked up)
             let bi = match ii.checked_sub(r0).and_then(|k| bins.get(k)) {
                 Some(&b) => b as usize,
                 None => self.bin(xi),
             };
-            if c.j == WALL {
+            if rec.j == WALL {
                 let a = &mut acc[bi];
                 for k in 0..9 {
                     a[SC + k] += full[k];
                 }
-                a[P] += c.power;
+                a[P] += rec.power;
                 continue;
             }
             // the segment from x_i to x_j: usually within x_i's bin and the two beside it
-            // (those three are visited, without walks), else walked
+            // (its end bins found without walks), else walked
             let xj = xi - d[0];
             let (lo, hi) = (xi.min(xj), xi.max(xj));
             let (kl, kh) = (bi.saturating_sub(1), (bi + 1).min(nb - 1));
-            let (k0, k1, visit) = if lo >= edges[kl] && hi < edges[kh + 1] {
-                // the segment's end bins (it starts in bin bi)
+            let (k0, k1) = if lo >= edges[kl] && hi < edges[kh + 1] {
+                // (it starts in bin bi)
                 let k0 = if bi > 0 && lo < edges[bi] { bi - 1 } else { bi };
                 let k1 = if bi + 1 < nb && hi >= edges[bi + 1] {
                     bi + 1
                 } else {
                     bi
                 };
-                (k0, k1, kl..=kh)
+                (k0, k1)
             } else {
-                let (k0, k1) = self.reach(bi, lo, hi);
-                (k0, k1, k0..=k1)
+                self.reach(bi, lo, hi)
             };
             // the power half and half, to the bins of the two centres (x_j's bin from the
             // branch vector: no walk to particle j; the channel is not periodic across x)
-            let half = 0.5 * c.power;
+            let half = 0.5 * rec.power;
             acc[bi][P] += half;
             acc[if xj < xi { k0 } else { k1 }][P] += half;
-            // a segment in one bin (or too short to split) gives all of it to that bin (share
-            // exactly 1); else each bin its length inside; a visited bin it does not reach
-            // gets +-0 (no change)
+            // a segment in one bin (or too short to split) gives all of it to that bin; else
+            // each bin from k0 to k1 its length inside. (The bins it does not reach get
+            // nothing: adding their +-0 would not change a sum that starts at +0.)
             let span = hi - lo;
-            let whole = k0 == k1 || span < 1e-12;
+            if k0 == k1 || span < 1e-12 {
+                let a = &mut acc[k0];
+                for q in 0..9 {
+                    a[SC + q] += full[q];
+                }
+                continue;
+            }
             let inv = 1.0 / span;
-            for k in visit {
-                let share = if whole {
-                    if k == k0 {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                } else {
-                    (hi.min(edges[k + 1]) - lo.max(edges[k])).max(0.0) * inv
-                };
+            for k in k0..=k1 {
+                let share = (hi.min(edges[k + 1]) - lo.max(edges[k])).max(0.0) * inv;
                 let a = &mut acc[k];
                 for q in 0..9 {
                     a[SC + q] += share * full[q];
@@ -260,18 +253,13 @@ impl Lookup {
 }
 
 /// One chunk's sums as a pass with an AVX2 twin (the same operations, compiled wider).
-struct ChunkSums<'a, 'b>(
-    &'a Lookup,
-    &'a SampleView<'b>,
-    std::ops::Range<usize>,
-    &'a [ContactRec],
-);
+struct ChunkSums<'a, 'b>(&'a Lookup, &'a ChunkView<'b>);
 
 impl crate::engine::simd::Twin for ChunkSums<'_, '_> {
     type Out = Vec<[f64; NACC]>;
     #[inline(always)]
     fn base(self) -> Self::Out {
-        self.0.sums(self.1, self.2, self.3)
+        self.0.sums(self.1)
     }
 }
 
@@ -307,6 +295,8 @@ pub struct Bins {
     t0: f64,
     index: u64,
     closed: Vec<Table>,
+    /// The coming sample's chunk sums, when the team made them (else empty).
+    parts: Vec<Vec<f64>>,
 }
 
 impl Bins {
@@ -350,33 +340,45 @@ impl Bins {
             t0: 0.0,
             index: 0,
             closed: Vec::new(),
+            parts: Vec::new(),
         })
     }
 
     /// The sums of one sample, added to the open window: each force-loop chunk's particles
-    /// and contacts summed apart (in parallel), then the chunks' sums added in chunk order, so
-    /// the bits do not depend on the thread count.
+    /// and contacts summed apart (by the team of threads as it completes the chunks, or here in
+    /// parallel), then the chunks' sums added in chunk order, so the bits do not depend on the
+    /// thread count or on who summed a chunk.
     fn accumulate(&mut self, v: &SampleView) {
         let n = v.p.len();
         // the force loop's chunks (the records are theirs)
         let ch = crate::neighbor::chunk_size(n);
         let nch = n.div_ceil(ch);
-        let lookup = &self.lookup;
-        let parts: Vec<Vec<[f64; NACC]>> = (0..nch)
-            .into_par_iter()
-            .map(|c| {
-                let r = (c * ch).min(n)..((c + 1) * ch).min(n);
-                let recs = v.contacts.get(c).map_or(&[][..], |x| &x[..]);
-                crate::engine::simd::dispatch(ChunkSums(lookup, v, r, recs))
-            })
-            .collect();
+        let parts = std::mem::take(&mut self.parts);
+        let parts = if parts.len() == nch {
+            parts
+        } else {
+            (0..nch)
+                .into_par_iter()
+                .map(|c| {
+                    let r = (c * ch).min(n)..((c + 1) * ch).min(n);
+                    let recs = v.contacts.get(c).map_or(&[][..], |x| &x[..]);
+                    self.chunk_sums(&ChunkView::of(v.p, r, recs))
+                })
+                .collect()
+        };
         for part in parts {
-            for (a, b) in self.acc.iter_mut().zip(&part) {
+            for (a, b) in self.acc.iter_mut().zip(part.chunks_exact(NACC)) {
                 for (x, y) in a.iter_mut().zip(b) {
                     *x += y;
                 }
             }
         }
+    }
+
+    /// One chunk's sums, flat (bin after bin).
+    fn chunk_sums(&self, c: &ChunkView) -> Vec<f64> {
+        let sums = crate::engine::simd::dispatch(ChunkSums(&self.lookup, c));
+        sums.into_iter().flatten().collect()
     }
 
     /// The rows of the window closed at time `t1`.
@@ -511,6 +513,12 @@ impl Sampler for Bins {
     fn columns(&self) -> Vec<&'static str> {
         Self::column_names()
     }
+    fn chunk_part(&self, c: &ChunkView) -> Option<Vec<f64>> {
+        Some(self.chunk_sums(c))
+    }
+    fn set_parts(&mut self, parts: Vec<Vec<f64>>) {
+        self.parts = parts;
+    }
     fn sample(&mut self, v: &SampleView) -> Result<()> {
         if self.n == 0 {
             self.t0 = v.time;
@@ -642,9 +650,9 @@ impl Sampler for Series {
     }
     fn sample(&mut self, v: &SampleView) -> Result<()> {
         let p = v.p;
-        let mv = p.momentum();
-        let vcm = mv / p.mass.iter().sum::<f64>();
-        let (ket, ker) = p.kinetic_energy();
+        let m = p.motion();
+        let (mv, ket, ker) = (m.momentum, m.translational, m.rotational);
+        let vcm = mv / m.mass;
         let wf = v.wall_force;
         let imp = v.wall_impulse[0] + v.wall_impulse[1];
         let a = self.area;
@@ -690,6 +698,7 @@ impl Sampler for Series {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sampling::ContactRec;
 
     #[test]
     fn fast_lookup_is_searchsorted() {
@@ -813,10 +822,13 @@ mod tests {
             let l = Lookup::new(e);
             for (c, rc) in recs.iter().enumerate() {
                 let r = c * ch..(c + 1) * ch;
-                let (a, b) = (l.sums(&view, r.clone(), rc), sums_before(&l, &view, r, rc));
+                let (a, b) = (
+                    l.sums(&ChunkView::of(&p, r.clone(), rc)),
+                    sums_before(&l, &view, r, rc),
+                );
                 for (x, y) in a.iter().zip(&b) {
                     for (u, w) in x.iter().zip(y) {
-                        assert!(u == w, "edges {e:?}: {u:e} != {w:e}");
+                        assert!(u.to_bits() == w.to_bits(), "edges {e:?}: {u:e} != {w:e}");
                     }
                 }
             }
@@ -964,7 +976,6 @@ mod tests {
     fn sums_timing() {
         let (n, ch) = (6754, 1689);
         let (p, recs) = random_state(n, ch, 2475);
-        let view = view_of(&p, &recs);
         let edges: Vec<f64> = (0..=20).map(|k| k as f64).collect();
         let l = Lookup::new(&edges);
         let reps = 1000;
@@ -974,12 +985,8 @@ mod tests {
             for _ in 0..reps {
                 for (c, r) in recs.iter().enumerate() {
                     let rc = if with { &r[..] } else { &[][..] };
-                    let part = crate::engine::simd::dispatch(ChunkSums(
-                        &l,
-                        &view,
-                        c * ch..((c + 1) * ch).min(n),
-                        rc,
-                    ));
+                    let cv = ChunkView::of(&p, c * ch..((c + 1) * ch).min(n), rc);
+                    let part = crate::engine::simd::dispatch(ChunkSums(&l, &cv));
                     sink += part[3][SC];
                 }
             }

@@ -75,6 +75,35 @@ impl SampleView<'_> {
     }
 }
 
+/// One force-loop chunk of a sampled step: its particles `r`, everyone's positions, radii and
+/// masses, the chunk's own velocities and spins (indexed from `r.start`), and its contact
+/// records. The team of threads hands it to [`Sampler::chunk_part`] right after completing the
+/// chunk, while its particles are in cache and the other chunks are still being completed.
+pub struct ChunkView<'a> {
+    pub r: std::ops::Range<usize>,
+    pub x: &'a [V3],
+    pub radius: &'a [f64],
+    pub mass: &'a [f64],
+    pub v: &'a [V3],
+    pub omega: &'a [V3],
+    pub recs: &'a [ContactRec],
+}
+
+impl<'a> ChunkView<'a> {
+    /// Chunk `r` of the particles `p`, with its records `recs`.
+    pub fn of(p: &'a Particles, r: std::ops::Range<usize>, recs: &'a [ContactRec]) -> Self {
+        ChunkView {
+            v: &p.v[r.clone()],
+            omega: &p.omega[r.clone()],
+            r,
+            x: &p.x,
+            radius: &p.radius,
+            mass: &p.mass,
+            recs,
+        }
+    }
+}
+
 /// What a sampler kind is configured with (the bindings check types; [`make`] checks values).
 #[derive(Clone, Debug, Default)]
 pub struct SamplerSpec {
@@ -115,6 +144,15 @@ pub trait Sampler: Send + Sync {
     }
     /// Take one sample of the state after a step.
     fn sample(&mut self, v: &SampleView) -> Result<()>;
+    /// Its sums over one force-loop chunk of a sampled step (None: it has no such part), made
+    /// by the team's thread that completed the chunk; the engine hands them back in chunk
+    /// order through `set_parts` before the `sample` that uses them. They must be what that
+    /// `sample` would compute itself, bit for bit (it does when given none).
+    fn chunk_part(&self, _c: &ChunkView) -> Option<Vec<f64>> {
+        None
+    }
+    /// The parts of the coming sample, one per chunk in chunk order.
+    fn set_parts(&mut self, _parts: Vec<Vec<f64>>) {}
     /// The tables closed since the last call (all columns), oldest first.
     fn take(&mut self) -> Vec<Table>;
     /// The open window (and anything not yet taken), for a checkpoint.
