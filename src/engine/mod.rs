@@ -92,6 +92,10 @@ pub struct Timers {
     pub sampling: f64,
 }
 
+/// Chunk sums a team made for a completed sampled step: a sampler's index and its parts, one
+/// per force-loop chunk in chunk order.
+pub(crate) type ChunkParts = Vec<(usize, Vec<Vec<f64>>)>;
+
 /// Run-time guards: stop with a clear error instead of writing NaN.
 #[derive(Clone, Debug)]
 pub struct Guards {
@@ -209,9 +213,6 @@ pub struct Engine<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> {
     pub(crate) crecs: Vec<Vec<ContactRec>>,
     /// Statistics taken inside the step loop on their triggers (`crate::sampling`).
     pub samplers: Vec<Box<dyn Sampler>>,
-    /// Chunk sums the team made for a sampled step (`Sampler::chunk_part`): the step, the
-    /// sampler's index and its parts in chunk order; taken by that step's `sample`.
-    chunk_parts: Vec<(u64, usize, Vec<Vec<f64>>)>,
     /// Total energy at the first guard check (closed systems only).
     energy_ref: Option<f64>,
     forces_valid: bool,
@@ -332,7 +333,6 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             cross_stats: Vec::new(),
             crecs: Vec::new(),
             samplers: Vec::new(),
-            chunk_parts: Vec::new(),
             energy_ref: None,
             forces_valid: false,
             tuning: Tuning::default(),
@@ -613,13 +613,13 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 ((left - 1).min(to_check).min(to_sample - 1), false)
             };
             if budget > 0 && self.team_ready() {
-                if let Some((done, exit)) = self.team_steps(budget, complete, records) {
+                if let Some((done, exit, parts)) = self.team_steps(budget, complete, records) {
                     k += done;
                     match exit {
                         TeamExit::Done => {
                             if complete && done == budget {
                                 self.after_step_checks()?;
-                                self.sample()?;
+                                self.sample(parts)?;
                             }
                         }
                         TeamExit::Overlap => {
@@ -635,7 +635,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                             self.step_finish(moved, true, !sampled && k + 1 < n, Instant::now())?;
                             k += 1;
                             if sampled {
-                                self.sample()?;
+                                self.sample(Vec::new())?;
                             }
                         }
                     }
@@ -646,7 +646,7 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
                 self.want_records = records;
                 self.step_once(false)?;
                 k += 1;
-                self.sample()?;
+                self.sample(Vec::new())?;
                 continue;
             }
             self.step_once(k + 1 < n)?;
@@ -677,15 +677,17 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
     }
 
     /// Hand the state after a sampled step to the samplers due at this step.
-    fn sample(&mut self) -> Result<()> {
+    /// `parts`: the chunk sums the team made for this step (`Sampler::chunk_part`), by
+    /// sampler index.
+    fn sample(&mut self, parts: ChunkParts) -> Result<()> {
         let t0 = Instant::now();
-        let r = self.sample_due();
+        let r = self.sample_due(parts);
         self.timers.sampling += t0.elapsed().as_secs_f64();
         r
     }
 
     /// `sample` without its timer.
-    fn sample_due(&mut self) -> Result<()> {
+    fn sample_due(&mut self, mut parts: ChunkParts) -> Result<()> {
         let nw = self.walls.planes().len();
         let step = self.step;
         let elastic = self
@@ -707,11 +709,10 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             observables: self.domain.observables(),
             elastic,
         };
-        let mut parts = std::mem::take(&mut self.chunk_parts);
         for (si, s) in self.samplers.iter_mut().enumerate() {
             if step.is_multiple_of(s.every()) {
-                if let Some(k) = parts.iter().position(|q| q.0 == step && q.1 == si) {
-                    s.set_parts(parts.swap_remove(k).2);
+                if let Some(k) = parts.iter().position(|q| q.0 == si) {
+                    s.set_parts(parts.swap_remove(k).1);
                 }
                 s.sample(&view)?;
             }

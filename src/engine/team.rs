@@ -252,15 +252,15 @@ where
     /// a guard check due) in one team. With `complete`, the last of them is a sampled step:
     /// it is completed in the team (its cross pass and final half-kick done, nothing
     /// deferred), its evaluation keeping the contact records if `records`, and it may be the
-    /// run's last or have a guard check due (the caller checks). Returns the steps done and
-    /// how the stint ended; `None` when another team holds the process's team (step the
-    /// usual way).
+    /// run's last or have a guard check due (the caller checks). Returns the steps done, how
+    /// the stint ended and the due samplers' chunk sums of a completed last step; `None` when
+    /// another team holds the process's team (step the usual way).
     pub(super) fn team_steps(
         &mut self,
         budget: u64,
         complete: bool,
         records: bool,
-    ) -> Option<(u64, TeamExit)> {
+    ) -> Option<(u64, TeamExit, ChunkParts)> {
         let _guard = match TEAM.try_lock() {
             Ok(g) => g,
             Err(TryLockError::Poisoned(e)) => e.into_inner(),
@@ -293,7 +293,6 @@ where
         } else {
             Vec::new()
         };
-        self.chunk_parts.clear();
 
         // what the passes write, as shared pointers; what they only read, as references
         let Particles {
@@ -700,18 +699,19 @@ where
         if let Some(d) = last_diag {
             self.diag = d;
         }
-        if complete && done == budget {
-            // (a sampler's parts only when it gave one for every chunk)
-            for (k, &si) in due.iter().enumerate() {
-                let mine: Option<Vec<Vec<f64>>> = parts[k * nch..(k + 1) * nch]
-                    .iter_mut()
-                    .map(Option::take)
-                    .collect();
-                if let Some(mine) = mine {
-                    self.chunk_parts.push((step0 + budget, si, mine));
-                }
-            }
-        }
+        // the due samplers' parts of a completed last step (a sampler's only when it gave
+        // one for every chunk)
+        let parts: ChunkParts = if complete && done == budget {
+            due.iter()
+                .zip(parts.chunks_exact_mut(nch))
+                .filter_map(|(&si, p)| {
+                    let mine: Option<Vec<Vec<f64>>> = p.iter_mut().map(Option::take).collect();
+                    mine.map(|m| (si, m))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         // a stint that ends inside a step has done that step's first pass, which took the
         // pending cross pass; one that completed its last step has nothing pending;
         // otherwise the last step's cross pass is pending
@@ -733,6 +733,6 @@ where
         for _ in 0..done {
             self.time += dt;
         }
-        Some((done, exit))
+        Some((done, exit, parts))
     }
 }
