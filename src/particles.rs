@@ -31,6 +31,42 @@ pub struct Motion {
     pub rotational: f64,
 }
 
+impl Motion {
+    /// The sums over the particles of these slices (masses, velocities, spins, inverse
+    /// moments of inertia, all of one length), in their order.
+    pub fn of(mass: &[f64], v: &[V3], omega: &[V3], inv_inertia: &[f64]) -> Motion {
+        let mut m = Motion::default();
+        for (((&mi, vi), wi), &ii) in mass.iter().zip(v).zip(omega).zip(inv_inertia) {
+            m.momentum += mi * vi;
+            m.mass += mi;
+            m.translational += 0.5 * mi * vi.norm_squared();
+            m.rotational += 0.5 * wi.norm_squared() / ii;
+        }
+        m
+    }
+
+    /// As a flat row: momentum (3), mass, translational and rotational energy.
+    pub fn to_row(self) -> [f64; 6] {
+        let p = self.momentum;
+        [
+            p.x,
+            p.y,
+            p.z,
+            self.mass,
+            self.translational,
+            self.rotational,
+        ]
+    }
+
+    /// `self` plus the sums of a `to_row` row.
+    pub fn add_row(&mut self, r: &[f64]) {
+        self.momentum += V3::new(r[0], r[1], r[2]);
+        self.mass += r[3];
+        self.translational += r[4];
+        self.rotational += r[5];
+    }
+}
+
 impl Particles {
     /// Build from diameters and a single density; positions given; velocities and spins zero
     /// unless set afterwards.
@@ -119,14 +155,7 @@ impl Particles {
     /// Momentum, total mass and kinetic energies in one pass (each summed in particle order,
     /// as the separate sums would be: the same bits).
     pub fn motion(&self) -> Motion {
-        let mut m = Motion::default();
-        for i in 0..self.len() {
-            m.momentum += self.mass[i] * self.v[i];
-            m.mass += self.mass[i];
-            m.translational += 0.5 * self.mass[i] * self.v[i].norm_squared();
-            m.rotational += 0.5 * self.omega[i].norm_squared() / self.inv_inertia[i];
-        }
-        m
+        Motion::of(&self.mass, &self.v, &self.omega, &self.inv_inertia)
     }
 
     /// Apply a permutation: new[k] = old[perm[k]].

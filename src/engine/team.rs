@@ -636,6 +636,7 @@ where
                                 x: px.slice(0..n),
                                 radius: rad,
                                 mass,
+                                inv_inertia: ii,
                                 v: pv.slice(r.clone()),
                                 omega: pw.slice(r.clone()),
                                 recs: if records { &*pcrec.get().add(c) } else { &[] },

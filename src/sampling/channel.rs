@@ -15,6 +15,7 @@ use super::{
     check_finite, check_window, ChunkView, Rows, SampleView, Sampler, SamplerSpec, Setup, WALL,
 };
 use crate::error::{Error, Result};
+use crate::particles::Motion;
 use crate::table::Table;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -570,6 +571,8 @@ pub struct Series {
     /// H B: the walls' area.
     area: f64,
     rows: Rows,
+    /// The coming sample's chunk sums (`Motion` rows), when the team made them (else empty).
+    parts: Vec<Vec<f64>>,
 }
 
 const SERIES: [&str; 21] = [
@@ -627,8 +630,37 @@ impl Series {
             every: spec.every,
             area: setup.widths[1] * setup.widths[2],
             rows: Rows::new(names, units, &["step"]),
+            parts: Vec::new(),
         })
     }
+
+    /// The particles' motion: each force-loop chunk summed apart (by the team of threads as
+    /// it completes the chunks, or here), then the chunks added in chunk order, so the bits do
+    /// not depend on the thread count or on who summed a chunk.
+    fn motion(&mut self, p: &crate::particles::Particles) -> Motion {
+        let n = p.len();
+        let ch = crate::neighbor::chunk_size(n);
+        let nch = n.div_ceil(ch);
+        let parts = std::mem::take(&mut self.parts);
+        let mut m = Motion::default();
+        if parts.len() == nch {
+            for part in &parts {
+                m.add_row(part);
+            }
+        } else {
+            for c in 0..nch {
+                let r = c * ch..((c + 1) * ch).min(n);
+                m.add_row(&chunk_motion(&ChunkView::of(p, r, &[])));
+            }
+        }
+        m
+    }
+}
+
+/// One chunk's motion sums, as a `Motion` row.
+fn chunk_motion(c: &ChunkView) -> [f64; 6] {
+    let r = c.r.clone();
+    Motion::of(&c.mass[r.clone()], c.v, c.omega, &c.inv_inertia[r]).to_row()
 }
 
 impl Sampler for Series {
@@ -648,9 +680,14 @@ impl Sampler for Series {
     fn columns(&self) -> Vec<&'static str> {
         series_names()
     }
+    fn chunk_part(&self, c: &ChunkView) -> Option<Vec<f64>> {
+        Some(chunk_motion(c).to_vec())
+    }
+    fn set_parts(&mut self, parts: Vec<Vec<f64>>) {
+        self.parts = parts;
+    }
     fn sample(&mut self, v: &SampleView) -> Result<()> {
-        let p = v.p;
-        let m = p.motion();
+        let m = self.motion(v.p);
         let (mv, ket, ker) = (m.momentum, m.translational, m.rotational);
         let vcm = mv / m.mass;
         let wf = v.wall_force;

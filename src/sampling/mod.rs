@@ -75,8 +75,8 @@ impl SampleView<'_> {
     }
 }
 
-/// One force-loop chunk of a sampled step: its particles `r`, everyone's positions, radii and
-/// masses, the chunk's own velocities and spins (indexed from `r.start`), and its contact
+/// One force-loop chunk of a sampled step: its particles `r`, everyone's positions, radii,
+/// masses and inverse moments of inertia, the chunk's own velocities and spins (indexed from `r.start`), and its contact
 /// records. The team of threads hands it to [`Sampler::chunk_part`] right after completing the
 /// chunk, while its particles are in cache and the other chunks are still being completed.
 pub struct ChunkView<'a> {
@@ -84,6 +84,7 @@ pub struct ChunkView<'a> {
     pub x: &'a [V3],
     pub radius: &'a [f64],
     pub mass: &'a [f64],
+    pub inv_inertia: &'a [f64],
     pub v: &'a [V3],
     pub omega: &'a [V3],
     pub recs: &'a [ContactRec],
@@ -99,6 +100,7 @@ impl<'a> ChunkView<'a> {
             x: &p.x,
             radius: &p.radius,
             mass: &p.mass,
+            inv_inertia: &p.inv_inertia,
             recs,
         }
     }
