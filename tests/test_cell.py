@@ -5,7 +5,7 @@ import numpy as np
 import polars as pl
 import pytest
 from granflow.analysis.stats import mean_se
-from granflow.scenes.cell import ShearCell, fabric
+from granflow.scenes.cell import ShearCell, contact_time, contact_time_002, fabric
 
 
 def _series(c):
@@ -74,7 +74,21 @@ def test_scene_contains_only_what_it_needs():
 
 
 @pytest.mark.parametrize(
-    "kw, name", [({"p_ext": 0.0}, "p_ext"), ({"tau_ratio": 3.0}, "tau_ratio"), ({"N": 10}, "N")]
+    "kw, name",
+    [
+        ({"p_ext": 0.0}, "p_ext"),
+        ({"tau_ratio": 3.0}, "tau_ratio"),
+        ({"N": 10}, "N"),
+        ({"kt_ratio": 0.0}, "kt_ratio"),
+        ({"e_n": 1.5}, "e_n"),
+        ({"form": "walton"}, "form"),
+        ({"tc_reading": "mass"}, "tc_reading"),
+        ({"size_mix": {0.9: 0.3, 1.0: 0.4, 1.1: 0.2}}, "size_mix"),
+        ({"size_mix": {}}, "size_mix"),
+        ({"size_mix": {-1.0: 1.0}}, "size_mix"),
+        ({"d_min": 1.2, "d_max": 1.1}, "d_min"),
+        ({"mu_s": -0.1}, "mu_s"),
+    ],
 )
 def test_bad_input(kw, name):
     with pytest.raises(gf.ParameterError, match=name):
@@ -91,3 +105,50 @@ def test_cell_checkpoint_restart_is_bitwise(tmp_path):
     b.run(1000)
     assert np.array_equal(a.sim.positions(), b.sim.positions())
     assert a.sim.cell() == b.sim.cell()
+
+
+def test_contact_time_readings():
+    # 002 prints t_c = pi (2 kn/m_e - g^2/4)^(-1/2) with g = 0.5/t_c; the force law's binary
+    # collision lasts pi (kn/m_e - g^2/4)^(-1/2), and only then is e_n = exp(-g t_c/2) = exp(-1/4)
+    kn, m_e = 1.0, np.pi / 12
+    tp = contact_time(kn, m_e, "printed")
+    assert tp == pytest.approx(contact_time_002(kn, m_e)[0], rel=1e-15)
+    g = 0.5 / tp
+    assert tp == pytest.approx(np.pi / np.sqrt(2 * kn / m_e - g * g / 4), rel=1e-12)
+    tc = contact_time(kn, m_e, "collision")
+    g = 0.5 / tc
+    assert tc == pytest.approx(np.pi / np.sqrt(kn / m_e - g * g / 4), rel=1e-12)
+    assert tc / tp == pytest.approx(np.sqrt(2), rel=1e-12)
+    # a given restitution: the damped half-period with the rate that gives it
+    e = 0.6
+    t = contact_time(kn, m_e, "collision", e)
+    g = -2 * np.log(e) / t
+    assert t == pytest.approx(np.pi / np.sqrt(kn / m_e - g * g / 4), rel=1e-12)
+    # the default reading is still 002's printed one (same dt as before)
+    c = ShearCell(N=60, p_ext=1e-3, sample_every=None)
+    m = c.sim.law()
+    assert c.t_c == contact_time(kn, float(np.mean(np.pi * c._d**3 / 6)) / 2, "printed")
+    assert m["xi_n"] == 0.5 / c.t_c and m["kt"] == m["kn"]
+    assert c.sim.dt == pytest.approx(0.02 * c.t_c, rel=1e-15)
+    b = ShearCell(N=60, p_ext=1e-3, sample_every=None, tc_reading="collision")
+    assert b.t_c / c.t_c == pytest.approx(np.sqrt(2), rel=1e-12)
+
+
+def test_cell_takes_the_channels_material():
+    # 000's mix by number, kt = 2/7 kn, a restitution, Hertz: all reach the kernel, and it flows
+    mix = {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}
+    c = ShearCell(N=200, p_ext=1e-4, tau_ratio=0.5, sample_every=100, seed=1, size_mix=mix,
+                  kt_ratio=2 / 7, e_n=0.8, form="hertz", mu_s=0.5)
+    d = np.round(c._d, 9)
+    for size, frac in mix.items():
+        assert abs(np.count_nonzero(d == size) - frac * len(d)) <= 1
+    law = c.sim.law()
+    assert law["kt"] == pytest.approx(2 / 7 * law["kn"]) and law["e_n"] == 0.8
+    assert "xi_n" not in law
+    assert any("hertz" in x for x in c.sim.components())
+    c.run(3000)
+    s = _series(c)
+    assert s["phi"].is_finite().all() and s["phi"][-1] > s["phi"][0]
+    # TOML gives the mix's diameters as strings
+    t = ShearCell.from_spec({"N": 60, "p_ext": 1e-3, "size_mix": {"0.9": 0.5, "1.1": 0.5}})
+    assert sorted(set(np.round(t._d, 9))) == [0.9, 1.1]

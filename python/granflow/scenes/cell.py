@@ -5,7 +5,11 @@ Lechman): a fully periodic cell driven by an imposed pressure p_ext and shear st
 Defaults (§2.5): kn = kt, gamma_n = 0.5/t_c (rate damping), gamma_t = gamma_n/2, diameters
 uniform in [0.9, 1.1] a, dt = 0.02 t_c, a dilute random start at phi = 0.05. t_c is 002's
 t_c = pi (2 kn/m_e - gamma_n^2/4)^(-1/2) for two mean particles (solved together with
-gamma_n = 0.5/t_c). Density 1 (so the mean mass is ~pi/6 kn t_c^2 / a^2 in these units).
+gamma_n = 0.5/t_c); ``tc_reading="collision"`` takes the binary collision time of (2.17a)
+instead (see :func:`contact_time`). Density 1 (so the mean mass is ~pi/6 kn t_c^2 / a^2 in
+these units). Other materials: ``size_mix`` (a discrete mix by number fraction, e.g. the
+channel's {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}), ``kt_ratio``, ``e_n`` (restitution instead of
+gamma_n), ``form`` ("hooke" or "hertz"; with Hertz, t_c is the Hooke formula's time unit).
 
 Cell mass W_g = N kn a^2 / omega_g^2. 002 prints omega_g = 2.2 sqrt(m/kn), which is a time; we
 read it as omega_g = 2.2 sqrt(kn/m) (a frequency of the order of the contact frequency), the
@@ -31,7 +35,7 @@ import pyarrow as pa
 from granflow import _core
 from granflow.errors import InstabilityError, ParameterError
 from granflow.simulation import run_chunked
-from granflow.sizes import uniform
+from granflow.sizes import discrete, uniform
 
 from ._base import SampleTables, check_keys, register, run_with_checkpoints
 
@@ -45,6 +49,32 @@ def contact_time_002(kn: float, m_e: float) -> tuple[float, float]:
         g = 0.5 / tc
         tc = np.pi / np.sqrt(2 * kn / m_e - g * g / 4)
     return float(tc), float(0.5 / tc)
+
+
+#: How the cell reads 002's contact time (``tc_reading``).
+TC_READINGS = ("printed", "collision")
+
+
+def contact_time(kn: float, m_e: float, reading: str = "printed",
+                 e_n: float | None = None) -> float:
+    """The contact time t_c for two particles of reduced mass ``m_e``.
+
+    002 (§2.5) prints t_c = pi (2 kn/m_e - gamma_n^2/4)^(-1/2) with gamma_n = 0.5/t_c
+    (``reading="printed"``). The force law (2.17a), m_e x'' + m_e gamma_n x' + kn x = 0, makes a
+    binary collision last pi (kn/m_e - gamma_n^2/4)^(-1/2) (``"collision"``), and only then is
+    002's own e_n = exp(-gamma_n t_c/2) = exp(-1/4) the restitution; the printed reading gives
+    t_c 1/sqrt(2) of the collision's, e_n = 0.70. Solved together with the damping:
+    t_c^2 (c kn/m_e) = pi^2 + (ln e_n)^2, c = 2 (printed) or 1 (collision), where
+    ln e_n = -1/4 for gamma_n = 0.5/t_c. (With ``e_n`` given, the cell's damping is the kernel's
+    restitution form, derived per pair, and t_c is the time unit of that e_n.)
+    """
+    if reading not in TC_READINGS:
+        raise ParameterError(f"invalid tc_reading = {reading!r}: allowed one of {TC_READINGS}")
+    if e_n is None and reading == "printed":
+        return contact_time_002(kn, m_e)[0]  # (the fixed point, as before: the same bits)
+    c = 2.0 if reading == "printed" else 1.0
+    log_e = -0.25 if e_n is None else float(np.log(e_n))
+    return float(np.sqrt(np.pi**2 + log_e**2) / np.sqrt(c * kn / m_e))
 
 
 def fabric(normals: np.ndarray) -> np.ndarray:
@@ -69,7 +99,12 @@ class ShearCell:
     phi0: float = 0.05
     d_min: float = 0.9
     d_max: float = 1.1
+    size_mix: Mapping[float, float] | None = None
     density: float = 1.0
+    kt_ratio: float = 1.0
+    e_n: float | None = None
+    form: str = "hooke"
+    tc_reading: str = "printed"
     omega_g_factor: float = 2.2
     dt_frac: float = 0.02
     skin: float = 0.3
@@ -98,21 +133,30 @@ class ShearCell:
                                  "integer >= 1, or None for no observables")
         if not (0 < self.dt_frac <= 0.1):
             raise ParameterError(f"invalid dt_frac = {self.dt_frac}: allowed 0 < dt_frac <= 0.1")
-        dist = uniform(self.d_min, self.d_max)
-        vmean = np.pi / 6 * (self.d_min + self.d_max) / 2 * (
-            self.d_min**2 + self.d_max**2) / 2  # <d^3> for a uniform distribution
+        self._check_material()
+        if self.size_mix is not None:
+            mix = {float(k): float(v) for k, v in self.size_mix.items()}
+            dist = discrete(mix)
+            vmean = np.pi / 6 * sum(f * k**3 for k, f in mix.items())
+        else:
+            dist = uniform(self.d_min, self.d_max)
+            vmean = np.pi / 6 * (self.d_min + self.d_max) / 2 * (
+                self.d_min**2 + self.d_max**2) / 2  # <d^3> for a uniform distribution
         d = dist.diameters_for_volume(self.N * vmean, self.seed)
         vs = float(np.sum(np.pi * d**3 / 6))
         length = (vs / self.phi0) ** (1 / 3)
         x = np.asarray(_core.insert_spheres(d, (0, 0, 0), (length,) * 3, (True,) * 3, self.seed))
         self.a = float(np.mean(d))
         m_mean = float(np.mean(self.density * np.pi * d**3 / 6))
-        self.t_c, gamma_n = contact_time_002(self.kn, m_mean / 2)
+        self.t_c = contact_time(self.kn, m_mean / 2, self.tc_reading, self.e_n)
         omega_g = self.omega_g_factor * np.sqrt(self.kn / m_mean)
         wg = len(d) * self.kn * self.a**2 / omega_g**2
         self.w_g = float(wg)  # cell mass W_g (energy balance: K_g = W_g |L|^2 / 2)
-        law = {"kn": self.kn, "kt": self.kn, "xi_n": gamma_n, "xi_t_ratio": 0.5, "mu": self.mu_s}
-        self.sim = _core.cell_sim(x, d, self.density, float(length), "hooke", law,
+        # 002's gamma_n = 0.5/t_c (rate form), or the kernel's restitution form
+        damping = {"xi_n": 0.5 / self.t_c} if self.e_n is None else {"e_n": float(self.e_n)}
+        law = {"kn": self.kn, "kt": self.kt_ratio * self.kn, **damping, "xi_t_ratio": 0.5,
+               "mu": self.mu_s}
+        self.sim = _core.cell_sim(x, d, self.density, float(length), self.form, law,
                                   float(self.p_ext), float(self.tau_ratio * self.p_ext),
                                   float(wg), dt=self.dt_frac * self.t_c, skin=self.skin)
         if self.threads:
@@ -127,6 +171,39 @@ class ShearCell:
         self.phi_max = vs / length**3  # densest state seen at the run's chunk boundaries
         self.pbc = (True, True, True)
         self.wall_seconds = 0.0
+
+    def _check_material(self) -> None:
+        """The material's parameters, each against its allowed range (before anything runs)."""
+        if not (self.kn > 0):
+            raise ParameterError(f"invalid kn = {self.kn}: allowed > 0")
+        if not (0 < self.kt_ratio <= 10):
+            raise ParameterError(f"invalid kt_ratio = {self.kt_ratio}: allowed 0 < kt/kn <= 10")
+        if self.e_n is not None and not (0 < self.e_n <= 1):
+            raise ParameterError(f"invalid e_n = {self.e_n}: allowed 0 < e_n <= 1, or None for "
+                                 "002's gamma_n = 0.5/t_c")
+        if self.form not in ("hooke", "hertz"):
+            raise ParameterError(f"invalid form = {self.form!r}: allowed 'hooke' or 'hertz'")
+        if self.tc_reading not in TC_READINGS:
+            raise ParameterError(f"invalid tc_reading = {self.tc_reading!r}: allowed one of "
+                                 f"{TC_READINGS}")
+        if not (self.density > 0):
+            raise ParameterError(f"invalid density = {self.density}: allowed > 0")
+        if self.size_mix is None:
+            if not (0 < self.d_min <= self.d_max):
+                raise ParameterError(f"invalid d_min, d_max = {self.d_min}, {self.d_max}: "
+                                     "allowed 0 < d_min <= d_max")
+            return
+        try:
+            mix = {float(k): float(v) for k, v in self.size_mix.items()}
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise ParameterError(f"invalid size_mix = {self.size_mix!r}: allowed a mapping "
+                                 "diameter -> number fraction") from exc
+        if not mix or any(k <= 0 or v < 0 for k, v in mix.items()):
+            raise ParameterError(f"invalid size_mix = {self.size_mix!r}: allowed diameters > 0 "
+                                 "with number fractions >= 0")
+        if abs(sum(mix.values()) - 1) > 1e-9:
+            raise ParameterError(f"invalid size_mix = {self.size_mix!r}: the number fractions "
+                                 f"sum to {sum(mix.values()):.12g}, allowed 1")
 
     @property
     def core(self) -> _core.Sim:
