@@ -127,12 +127,19 @@ def test_example_toml_files_validate():
     from pathlib import Path
 
     from granflow.runner import load_spec, validate_spec
+    from granflow.study import check_grid, expand
 
     root = Path(__file__).parent.parent / "examples"
     files = sorted(root.glob("*.toml"))
-    assert {f.name for f in files} >= {"channel.toml", "cell.toml"}
+    assert {f.name for f in files} >= {"channel.toml", "cell.toml", "cell_sweep.toml"}
     for f in files:
-        validate_spec(load_spec(f))
+        spec = load_spec(f)
+        if "grid" in spec:  # a sweep file: a scene spec plus its grid and seeds
+            grid, seeds = spec.pop("grid"), spec.pop("seeds")
+            check_grid(validate_spec(spec), grid)
+            assert expand(spec, grid, seeds)
+        else:
+            validate_spec(spec)
 
 
 def test_sweep_records_a_failing_run_and_goes_on(tmp_path):
@@ -196,3 +203,33 @@ def test_duckdb_and_polars_lazy_scan_read_a_sweeps_channel_tables(tmp_path):
             .filter(pl.col("window") == 0).select("mu", "bin", "phi").collect())
     assert lazy.height == 2 * per_run[0.2].filter(pl.col("window") == 0).height
     assert set(lazy["mu"].to_list()) == {0.2, 0.5}
+
+
+def test_sweep_cli_records_failures(tmp_path, capsys):
+    toml = tmp_path / "grid.toml"
+    toml.write_text(
+        'scene = "gas"\nseeds = [1, 2]\n[params]\nL = 7.0\nphi = 0.25\nkn = 1e4\n'
+        "sample_every = 50\n[run]\nsteps = 100\n[grid]\nmu = [0.0, -1.0]\n"
+    )
+    out = tmp_path / "sw"
+    # mu = -1 fails at its runs (recorded, the others finish): exit status 1
+    assert main(["sweep", str(toml), "--out", str(out), "--workers", "1"]) == 1
+    df = pl.read_parquet(out / "sweep.parquet")
+    assert df.height == 4
+    assert df.filter(pl.col("mu") == 0.0)["status"].to_list() == ["finished"] * 2
+    bad = df.filter(pl.col("mu") == -1.0)
+    assert bad["status"].to_list() == ["failed"] * 2 and bad["error"].str.contains("mu").all()
+    assert "2 failed" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "grid, name",
+    [({}, "grid"), ({"mu": []}, "grid.mu"), ({"no_such": [1]}, "no_such"),
+     ({"mu": 0.3}, "grid.mu")],
+)
+def test_sweep_refuses_a_bad_grid_before_running(tmp_path, grid, name):
+    base = {**GAS, "run": {"steps": 100}, "output": {}}
+    with pytest.raises(gf.ParameterError, match=name):
+        run_grid(base, grid, tmp_path, seeds=[1])
+    assert not any(tmp_path.iterdir())
+

@@ -1,5 +1,5 @@
-"""Command line: ``granflow run SCENE.toml --out DIR``, ``granflow summary DIR``,
-``granflow plot DIR``."""
+"""Command line: ``granflow run SCENE.toml --out DIR``, ``granflow sweep GRID.toml --out DIR``,
+``granflow summary DIR``, ``granflow plot DIR``."""
 
 from __future__ import annotations
 
@@ -19,6 +19,34 @@ def _cmd_run(a: argparse.Namespace) -> int:
     print(f"{r.status}: {r.directory} ({r.wall_seconds:.1f} s)")
     _print_summary(r.summary)
     return 0
+
+
+def _cmd_sweep(a: argparse.Namespace) -> int:
+    import polars as pl
+
+    from granflow.errors import ParameterError
+    from granflow.runner import load_spec
+    from granflow.study import run_grid
+
+    spec = load_spec(a.grid)
+    grid = spec.pop("grid", None)
+    seeds = spec.pop("seeds", [spec.pop("seed", 0)])
+    if not isinstance(grid, dict):
+        raise ParameterError(f"invalid grid = {grid!r} in {a.grid}: allowed a [grid] table of "
+                             "parameter = [values]")
+    if not isinstance(seeds, list) or not all(isinstance(x, int) for x in seeds):
+        raise ParameterError(f"invalid seeds = {seeds!r}: allowed a list of integers")
+    df = run_grid(spec, grid, a.out, seeds=seeds, workers=a.workers, scheduler=a.scheduler)
+    out = Path(a.out) / "sweep.parquet"
+    df.write_parquet(out)
+    pl.Config.set_tbl_cols(-1)
+    pl.Config.set_tbl_rows(-1)
+    print(df)
+    failed = df.filter(pl.col("status") == "failed")
+    for row in failed.iter_rows(named=True):
+        print(f"failed: {row['directory']}: {row.get('error')}", file=sys.stderr)
+    print(f"{df.height} runs ({failed.height} failed); table {out}")
+    return 1 if failed.height else 0
 
 
 def _print_summary(s: dict) -> None:
@@ -66,6 +94,19 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--threads", type=int, default=None, help="threads (default: all cores)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(fn=_cmd_run)
+    w = sub.add_parser("sweep", help="run a grid of a scene's parameters and seeds",
+                       description="Run every combination of a TOML file's [grid] (parameter = "
+                       "[values]) and its seeds = [...] over a base scene spec (the other keys, "
+                       "as for 'run'), into one hive-partitioned dataset DIR/key=value/.../seed=s/;"
+                       " resumable (finished runs are skipped); failed runs are recorded with "
+                       "their error in DIR/sweep.parquet (exit status 1).")
+    w.add_argument("grid", help="sweep TOML file: a scene spec plus [grid] and seeds")
+    w.add_argument("--out", required=True, help="output directory (the dataset's root)")
+    w.add_argument("--workers", type=int, default=None,
+                   help="local processes (default: one per core, at most one per run)")
+    w.add_argument("--scheduler", default=None,
+                   help="a Dask scheduler address (tcp://host:port) to run on instead")
+    w.set_defaults(fn=_cmd_sweep)
     s = sub.add_parser("summary", help="print a run's analysis with error bars",
                        description="Print the summary (means ± standard errors) of a run.")
     s.add_argument("dir")

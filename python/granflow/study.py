@@ -13,6 +13,7 @@ import multiprocessing
 import os
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,24 @@ import polars as pl
 from granflow.errors import GranflowError, ParameterError
 from granflow.io import hive_dir
 from granflow.runner import execute, validate_spec
+
+
+def check_grid(base: Mapping[str, Any], grid: Mapping[str, Any]) -> None:
+    """Refuse a grid before anything runs: at least one key, each a parameter of the base
+    spec's scene, each with a non-empty list of values."""
+    if not grid:
+        raise ParameterError("invalid grid = {}: allowed at least one parameter with a list "
+                             "of values")
+    from granflow.scenes import get_scene
+
+    cls = get_scene(str(base.get("scene")))
+    known = ({f.name for f in fields(cls)} - {"seed", "threads"}) if is_dataclass(cls) else None
+    for k, v in grid.items():
+        if known is not None and k not in known:
+            raise ParameterError(f"invalid grid key {k!r}: scene {base.get('scene')!r} has no "
+                                 f"such parameter; allowed one of {sorted(known)}")
+        if isinstance(v, (str, bytes)) or not isinstance(v, Sequence) or len(v) == 0:
+            raise ParameterError(f"invalid grid.{k} = {v!r}: allowed a non-empty list of values")
 
 
 def expand(
@@ -70,6 +89,7 @@ def run_grid(
 
     ``workers`` defaults to the number of cores (each run then gets cores/workers threads);
     ``scheduler`` is a Dask scheduler address (or a ``distributed.Client``) to run there."""
+    check_grid(validate_spec(base), grid)
     tasks = expand(base, grid, seeds)
     root = Path(root)
     dirs = [str(hive_dir(root, part)) for part, _ in tasks]
