@@ -30,7 +30,9 @@ def _cmd_sweep(a: argparse.Namespace) -> int:
 
     spec = load_spec(a.grid)
     grid = spec.pop("grid", None)
-    seeds = spec.pop("seeds", [spec.pop("seed", 0)])
+    # (a single seed = s is a grid of one seed)
+    seed = spec.pop("seed", 0)
+    seeds = spec.pop("seeds", [seed])
     if not isinstance(grid, dict):
         raise ParameterError(f"invalid grid = {grid!r} in {a.grid}: allowed a [grid] table of "
                              "parameter = [values]")

@@ -76,9 +76,8 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Engine<F, T, D, W
             None
         } else {
             (0..p.len()).find(|&i| {
-                !(p.x[i].iter().all(|c| c.is_finite())
-                    && p.v[i].iter().all(|c| c.is_finite())
-                    && p.omega[i].iter().all(|c| c.is_finite()))
+                let one = |a: &[crate::V3]| finite(&a[i..=i]);
+                !(one(&p.x) && one(&p.v) && one(&p.omega))
             })
         };
         if let Some(i) = bad {

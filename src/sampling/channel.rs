@@ -12,12 +12,12 @@
 //! contact's power split half and half (walls in full).
 
 use super::{
-    check_finite, check_window, ChunkView, Rows, SampleView, Sampler, SamplerSpec, Setup, WALL,
+    check_finite, check_window, chunk_parts, ChunkView, Rows, SampleView, Sampler, SamplerSpec,
+    Setup, WALL,
 };
 use crate::error::{Error, Result};
 use crate::particles::Motion;
 use crate::table::Table;
-use rayon::prelude::*;
 use std::f64::consts::PI;
 
 const SIGMA: [&str; 9] = ["xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz"];
@@ -346,27 +346,11 @@ impl Bins {
     }
 
     /// The sums of one sample, added to the open window: each force-loop chunk's particles
-    /// and contacts summed apart (by the team of threads as it completes the chunks, or here in
-    /// parallel), then the chunks' sums added in chunk order, so the bits do not depend on the
-    /// thread count or on who summed a chunk.
+    /// and contacts summed apart (`chunk_parts`: by the team as it completes the chunks, or
+    /// here), then added in chunk order.
     fn accumulate(&mut self, v: &SampleView) {
-        let n = v.p.len();
-        // the force loop's chunks (the records are theirs)
-        let ch = crate::neighbor::chunk_size(n);
-        let nch = n.div_ceil(ch);
-        let parts = std::mem::take(&mut self.parts);
-        let parts = if parts.len() == nch {
-            parts
-        } else {
-            (0..nch)
-                .into_par_iter()
-                .map(|c| {
-                    let r = (c * ch).min(n)..((c + 1) * ch).min(n);
-                    let recs = v.contacts.get(c).map_or(&[][..], |x| &x[..]);
-                    self.chunk_sums(&ChunkView::of(v.p, r, recs))
-                })
-                .collect()
-        };
+        let given = std::mem::take(&mut self.parts);
+        let parts = chunk_parts(given, v, |c| self.chunk_sums(c));
         for part in parts {
             for (a, b) in self.acc.iter_mut().zip(part.chunks_exact(NACC)) {
                 for (x, y) in a.iter_mut().zip(b) {
@@ -634,33 +618,24 @@ impl Series {
         })
     }
 
-    /// The particles' motion: each force-loop chunk summed apart (by the team of threads as
-    /// it completes the chunks, or here), then the chunks added in chunk order, so the bits do
-    /// not depend on the thread count or on who summed a chunk.
-    fn motion(&mut self, p: &crate::particles::Particles) -> Motion {
-        let n = p.len();
-        let ch = crate::neighbor::chunk_size(n);
-        let nch = n.div_ceil(ch);
-        let parts = std::mem::take(&mut self.parts);
+    /// The particles' motion: each force-loop chunk summed apart (`chunk_parts`: by the team
+    /// as it completes the chunks, or here), then added in chunk order.
+    fn motion(&mut self, v: &SampleView) -> Motion {
+        let given = std::mem::take(&mut self.parts);
         let mut m = Motion::default();
-        if parts.len() == nch {
-            for part in &parts {
-                m.add_row(part);
-            }
-        } else {
-            for c in 0..nch {
-                let r = c * ch..((c + 1) * ch).min(n);
-                m.add_row(&chunk_motion(&ChunkView::of(p, r, &[])));
-            }
+        for part in chunk_parts(given, v, chunk_motion) {
+            m.add_row(&part);
         }
         m
     }
 }
 
 /// One chunk's motion sums, as a `Motion` row.
-fn chunk_motion(c: &ChunkView) -> [f64; 6] {
+fn chunk_motion(c: &ChunkView) -> Vec<f64> {
     let r = c.r.clone();
-    Motion::of(&c.mass[r.clone()], c.v, c.omega, &c.inv_inertia[r]).to_row()
+    Motion::of(&c.mass[r.clone()], c.v, c.omega, &c.inv_inertia[r])
+        .to_row()
+        .to_vec()
 }
 
 impl Sampler for Series {
@@ -681,13 +656,13 @@ impl Sampler for Series {
         series_names()
     }
     fn chunk_part(&self, c: &ChunkView) -> Option<Vec<f64>> {
-        Some(chunk_motion(c).to_vec())
+        Some(chunk_motion(c))
     }
     fn set_parts(&mut self, parts: Vec<Vec<f64>>) {
         self.parts = parts;
     }
     fn sample(&mut self, v: &SampleView) -> Result<()> {
-        let m = self.motion(v.p);
+        let m = self.motion(v);
         let (mv, ket, ker) = (m.momentum, m.translational, m.rotational);
         let vcm = mv / m.mass;
         let wf = v.wall_force;

@@ -106,6 +106,32 @@ impl<'a> ChunkView<'a> {
     }
 }
 
+/// A sample's per-chunk parts in chunk order: those the team made (`given`, when it made one
+/// for every chunk), else `part` of each force-loop chunk of the view's particles with that
+/// chunk's contact records, computed here in parallel. Either way each chunk is summed apart
+/// and the caller adds them in chunk order: the bits do not depend on the thread count or on
+/// who summed a chunk.
+pub(crate) fn chunk_parts(
+    given: Vec<Vec<f64>>,
+    v: &SampleView,
+    part: impl Fn(&ChunkView) -> Vec<f64> + Sync,
+) -> Vec<Vec<f64>> {
+    use rayon::prelude::*;
+    let n = v.p.len();
+    let ch = crate::neighbor::chunk_size(n);
+    let nch = n.div_ceil(ch);
+    if given.len() == nch {
+        return given;
+    }
+    (0..nch)
+        .into_par_iter()
+        .map(|c| {
+            let recs = v.contacts.get(c).map_or(&[][..], |x| &x[..]);
+            part(&ChunkView::of(v.p, c * ch..((c + 1) * ch).min(n), recs))
+        })
+        .collect()
+}
+
 /// What a sampler kind is configured with (the bindings check types; [`make`] checks values).
 #[derive(Clone, Debug, Default)]
 pub struct SamplerSpec {

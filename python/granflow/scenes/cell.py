@@ -173,7 +173,10 @@ class ShearCell:
         self.wall_seconds = 0.0
 
     def _check_material(self) -> None:
-        """The material's parameters, each against its allowed range (before anything runs)."""
+        """The material's parameters the scene computes with before the kernel sees them (t_c
+        from kn, density and e_n; the sizes), or that it names otherwise than the kernel
+        (kt_ratio, size_mix), each against its allowed range. The kernel checks the rest
+        (form), and contact_time the reading."""
         if not (self.kn > 0):
             raise ParameterError(f"invalid kn = {self.kn}: allowed > 0")
         if not (0 < self.kt_ratio <= 10):
@@ -181,11 +184,6 @@ class ShearCell:
         if self.e_n is not None and not (0 < self.e_n <= 1):
             raise ParameterError(f"invalid e_n = {self.e_n}: allowed 0 < e_n <= 1, or None for "
                                  "002's gamma_n = 0.5/t_c")
-        if self.form not in ("hooke", "hertz"):
-            raise ParameterError(f"invalid form = {self.form!r}: allowed 'hooke' or 'hertz'")
-        if self.tc_reading not in TC_READINGS:
-            raise ParameterError(f"invalid tc_reading = {self.tc_reading!r}: allowed one of "
-                                 f"{TC_READINGS}")
         if not (self.density > 0):
             raise ParameterError(f"invalid density = {self.density}: allowed > 0")
         if self.size_mix is None:
