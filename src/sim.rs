@@ -43,6 +43,8 @@ pub trait Simulation: Send + Sync {
     }
     /// Named scalar observables of the domain (empty for a static box).
     fn domain_observables(&self) -> Vec<(String, f64)>;
+    /// Change the imposed stress of a stress-controlled domain (an error for any other).
+    fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> Result<()>;
     /// Pair contacts of the last force evaluation: (id_i, id_j, r_ij = x_i - x_j (minimum
     /// image), force on i), in list order.
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)>;
@@ -307,6 +309,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     }
     fn domain_observables(&self) -> Vec<(String, f64)> {
         self.domain.observables()
+    }
+    fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> Result<()> {
+        self.domain.set_stress(p_ext, tau_ext)
     }
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)> {
         self.contact_list()

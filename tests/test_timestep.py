@@ -92,7 +92,7 @@ def test_sheared_packing_with_the_cell_as_built():
     """Runs a tiny study when the kernel has the cell; a clear error when it does not yet."""
     from granflow import _core
 
-    kw = {"params": {"N": 60}, "fracs": (10, 50), "time_tc": 2.0, "warmup_tc": 50.0}
+    kw = {"params": {"N": 60}, "fracs": (12, 50), "time_tc": 2.0, "warmup_tc": 50.0}
     if not hasattr(_core, "cell_sim"):
         with pytest.raises(gf.GranflowError, match="rebuild"):
             ts.sheared_packing_study(**kw)

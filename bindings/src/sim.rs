@@ -381,6 +381,11 @@ impl Sim {
     fn domain_observables(&self) -> Vec<(String, f64)> {
         self.inner.domain_observables()
     }
+    /// Change a stress-controlled cell's imposed pressure and xy shear stress from the next
+    /// step on (ParameterError outside p_ext > 0, |tau_ext/p_ext| <= 2, or for another domain).
+    fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> PyResult<()> {
+        self.inner.set_stress(p_ext, tau_ext).py_err()
+    }
     /// Time integral of the wall forces since the start ((n_walls, 3)).
     fn wall_impulse(&self) -> Vec<[f64; 3]> {
         self.inner

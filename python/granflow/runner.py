@@ -127,12 +127,15 @@ def execute(
         scene.restore(ck)
         scene.load_tables(_load_tables(d, scene.core.time))
         wall0 = float(man.get("wall_seconds", 0.0))
+        step0 = int(man.get("step0", 0))
     else:
         scene.prepare(progress=progress)
+        step0 = scene.core.step  # (a preparation that steps the kernel, as the cell's compaction)
     core = scene.core
     run, outp = spec["run"], spec["output"]
-    total = int(run["steps"])
-    every = int(run.get("checkpoint_every", 0)) or max(total // 10, 1)
+    steps = int(run["steps"])
+    total = step0 + steps
+    every = int(run.get("checkpoint_every", 0)) or max(steps // 10, 1)
     snap_every = int(outp.get("snapshot_every", 0))
     params = {"scene": spec["scene"], "seed": seed, **scene.parameters()}
     manifest: dict[str, Any] = {
@@ -141,8 +144,9 @@ def execute(
         "granflow_version": __version__,
         "seed": seed,
         "status": "running",
-        "steps_done": core.step,
-        "steps_total": total,
+        "step0": step0,
+        "steps_done": core.step - step0,
+        "steps_total": steps,
         "wall_seconds": wall0,
     }
     io.write_manifest(d, manifest)
@@ -155,7 +159,7 @@ def execute(
         scene.save_checkpoint(ck)
         manifest.update(
             status=status,
-            steps_done=core.step,
+            steps_done=core.step - step0,
             wall_seconds=wall0 + time.perf_counter() - t0,
         )
         io.write_manifest(d, manifest)
@@ -179,7 +183,7 @@ def execute(
         if outp.get("tables", True):
             for name, t in scene.tables().items():
                 io.write_parquet(t, d / f"{name}.parquet", params=params, seed=seed)
-        manifest.update(status="failed", steps_done=core.step,
+        manifest.update(status="failed", steps_done=core.step - step0,
                         wall_seconds=wall0 + time.perf_counter() - t0)
         io.write_manifest(d, manifest)
         raise

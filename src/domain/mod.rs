@@ -6,7 +6,7 @@
 //! packing, periodic in y and z only for the channel (walls at x = lo and x = hi are a separate
 //! component, see `crate::components::Walls`). The triclinic stress-controlled cell (Parrinello–Rahman) is [`PrCell`].
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::particles::Particles;
 use crate::{M3, V3};
 
@@ -115,6 +115,15 @@ pub trait Domain: Clone + Send + Sync + 'static {
     /// state unusable (e.g. a deforming cell too thin for the minimum image) reports it here.
     fn check(&self, _step: u64) -> Result<()> {
         Ok(())
+    }
+    /// Change the imposed stress (pressure, xy shear stress) from the next step on; only a
+    /// stress-controlled domain has one.
+    fn set_stress(&mut self, _p_ext: f64, _tau_ext: f64) -> Result<()> {
+        Err(Error::param(
+            "domain",
+            Self::NAME,
+            "a stress-controlled cell (this domain has no imposed stress)",
+        ))
     }
     /// Named scalar observables of the domain itself (e.g. a cell's velocity gradient).
     fn observables(&self) -> Vec<(String, f64)> {

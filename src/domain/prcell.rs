@@ -58,6 +58,19 @@ pub struct PrCell {
     pub d_max: f64,
 }
 
+/// The imposed stress a cell accepts: p_ext > 0, |tau_ext/p_ext| <= 2.
+fn check_stress(p_ext: f64, tau_ext: f64) -> Result<()> {
+    crate::error::check_positive("p_ext", p_ext)?;
+    if !(tau_ext.is_finite() && tau_ext.abs() <= 2.0 * p_ext) {
+        return Err(Error::param(
+            "tau_ext/p_ext",
+            tau_ext / p_ext,
+            "|tau_ext/p_ext| <= 2 (beyond, no dense steady flow: the cell accelerates)",
+        ));
+    }
+    Ok(())
+}
+
 fn upper(m: &M3) -> M3 {
     let mut u = *m;
     u[(1, 0)] = 0.0;
@@ -70,15 +83,8 @@ impl PrCell {
     /// A cubic cell of side `l` around the particles, at rest.
     pub fn new(l: f64, n: usize, wg: f64, p_ext: f64, tau_ext: f64) -> Result<Self> {
         crate::error::check_positive("cell length", l)?;
-        crate::error::check_positive("p_ext", p_ext)?;
+        check_stress(p_ext, tau_ext)?;
         crate::error::check_positive("W_g (cell mass)", wg)?;
-        if !(tau_ext.is_finite() && tau_ext.abs() <= 2.0 * p_ext) {
-            return Err(Error::param(
-                "tau_ext/p_ext",
-                tau_ext / p_ext,
-                "|tau_ext/p_ext| <= 2 (beyond, no dense steady flow: the cell accelerates)",
-            ));
-        }
         if n < 50 {
             return Err(Error::param(
                 "N",
@@ -314,6 +320,12 @@ impl Domain for PrCell {
     }
     fn on_rebuild(&mut self) {
         self.flips_build = self.flips;
+    }
+    fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> Result<()> {
+        check_stress(p_ext, tau_ext)?;
+        self.p_ext = p_ext;
+        self.tau_ext = tau_ext;
+        Ok(())
     }
     fn observables(&self) -> Vec<(String, f64)> {
         let ax = ["x", "y", "z"];

@@ -90,7 +90,9 @@ class Scene(Protocol):
     * ``from_spec(params, seed, threads)`` builds a scene from the ``params`` of a TOML spec;
       ``parameters()`` gives back every parameter (defaults included) for the tables' metadata.
     * ``prepare()`` makes the kernel simulation (a scene with a preparation protocol, like the
-      channel's fill and release, runs it here); it is idempotent, and ``run`` calls it.
+      channel's fill and release or the cell's compaction, runs it here); it is idempotent, and
+      ``run`` calls it. The kernel's step count may not be 0 after it (the cell's compaction is
+      part of its series); the runner counts a spec's ``steps`` from there.
     * ``core`` is the kernel simulation (:class:`granflow._core.Sim`) of a prepared scene.
     * ``run(steps, progress, checkpoint, checkpoint_every)`` advances ``steps`` steps; with
       ``checkpoint`` set it writes the scene's checkpoint there every ``checkpoint_every``

@@ -3,13 +3,21 @@ Lechman): a fully periodic cell driven by an imposed pressure p_ext and shear st
 (modularly-invariant Parrinello–Rahman, 2.10–2.16). Units: a (mean diameter), kn, t_c.
 
 Defaults (§2.5): kn = kt, gamma_n = 0.5/t_c (rate damping), gamma_t = gamma_n/2, diameters
-uniform in [0.9, 1.1] a, dt = 0.02 t_c, a dilute random start at phi = 0.05. t_c is 002's
-t_c = pi (2 kn/m_e - gamma_n^2/4)^(-1/2) for two mean particles (solved together with
-gamma_n = 0.5/t_c); ``tc_reading="collision"`` takes the binary collision time of (2.17a)
-instead (see :func:`contact_time`). Density 1 (so the mean mass is ~pi/6 kn t_c^2 / a^2 in
+uniform in [0.9, 1.1] a, dt = 0.02 t_c, a dilute random start at phi = 0.05. t_c is the
+binary collision time of the force law (2.17a) for two mean particles, pi (kn/m_e -
+gamma_n^2/4)^(-1/2), solved together with gamma_n = 0.5/t_c (``tc_reading="collision"``, so
+that 002's e_n = exp(-gamma_n t_c/2) = exp(-1/4) holds); ``tc_reading="printed"`` takes 002's
+formula as printed, with 2 kn/m_e: t_c shorter by sqrt(2), e_n = 0.70 (see
+:func:`contact_time` and docs/cell.md for what it changes). Density 1 (mean mass ~pi/6 in
 these units). Other materials: ``size_mix`` (a discrete mix by number fraction, e.g. the
 channel's {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}), ``kt_ratio``, ``e_n`` (restitution instead of
 gamma_n), ``form`` ("hooke" or "hertz"; with Hertz, t_c is the Hooke formula's time unit).
+
+Start (``start``): "compacted" (the default) first compacts the dilute gas under p_ext alone
+until phi settles (:meth:`ShearCell.prepare`), then switches tau_ext on; "dilute" is 002's
+protocol (both on at t = 0 on the phi = 0.05 gas). Shearing the gas before it has compacted
+heats it: above tau/p ~ 0.5 the dilute start ends on the overlap or dilation guard where the
+compacted start reaches steady flow (docs/cell.md).
 
 Cell mass W_g = N kn a^2 / omega_g^2. 002 prints omega_g = 2.2 sqrt(m/kn), which is a time; we
 read it as omega_g = 2.2 sqrt(kn/m) (a frequency of the order of the contact frequency), the
@@ -24,6 +32,7 @@ positive eigenvalue sum is compaction); the L_ab columns stay kinematic (2.16). 
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -51,11 +60,17 @@ def contact_time_002(kn: float, m_e: float) -> tuple[float, float]:
     return float(tc), float(0.5 / tc)
 
 
+#: How the cell starts (``start``), and the compaction of a "compacted" start: stints of
+#: 40 t_c until phi changes by less than COMPACT_TOL over one, at most COMPACT_MAX_STINTS.
+STARTS = ("compacted", "dilute")
+COMPACT_TOL = 2e-4
+COMPACT_MAX_STINTS = 2000
+
 #: How the cell reads 002's contact time (``tc_reading``).
 TC_READINGS = ("printed", "collision")
 
 
-def contact_time(kn: float, m_e: float, reading: str = "printed",
+def contact_time(kn: float, m_e: float, reading: str = "collision",
                  e_n: float | None = None) -> float:
     """The contact time t_c for two particles of reduced mass ``m_e``.
 
@@ -104,7 +119,8 @@ class ShearCell:
     kt_ratio: float = 1.0
     e_n: float | None = None
     form: str = "hooke"
-    tc_reading: str = "printed"
+    tc_reading: str = "collision"
+    start: str = "compacted"
     omega_g_factor: float = 2.2
     dt_frac: float = 0.02
     skin: float = 0.3
@@ -131,6 +147,8 @@ class ShearCell:
                 or (isinstance(self.sample_every, int) and self.sample_every >= 1)):
             raise ParameterError(f"invalid sample_every = {self.sample_every!r}: allowed an "
                                  "integer >= 1, or None for no observables")
+        if self.start not in STARTS:
+            raise ParameterError(f"invalid start = {self.start!r}: allowed one of {STARTS}")
         if not (0 < self.dt_frac <= 0.1):
             raise ParameterError(f"invalid dt_frac = {self.dt_frac}: allowed 0 < dt_frac <= 0.1")
         self._check_material()
@@ -171,6 +189,8 @@ class ShearCell:
         self.phi_max = vs / length**3  # densest state seen at the run's chunk boundaries
         self.pbc = (True, True, True)
         self.wall_seconds = 0.0
+        #: time at which tau_ext acts (after the compaction of a "compacted" start)
+        self.shear_start_time: float | None = 0.0 if self.start == "dilute" else None
 
     def _check_material(self) -> None:
         """The material's parameters the scene computes with before the kernel sees them (t_c
@@ -209,7 +229,23 @@ class ShearCell:
         return self.sim
 
     def prepare(self, progress: bool | None = None) -> None:
-        """Nothing to do: the cell starts from its dilute random packing, made when built."""
+        """For ``start="compacted"``: compact the dilute packing under p_ext alone (tau_ext = 0)
+        in stints of 40 t_c until phi changes by less than ``COMPACT_TOL`` (relative) over a
+        stint (at most ``COMPACT_MAX_STINTS``), then switch tau_ext on. The stints are sampled
+        as any run (the series shows the compaction); ``shear_start_time`` marks the switch.
+        Does nothing for ``start="dilute"``, once done, or after :meth:`restore`."""
+        if self.shear_start_time is not None:
+            return
+        stint = max(1, round(40 / self.dt_frac))
+        self.sim.set_stress(float(self.p_ext), 0.0)
+        phi = self._vs / float(self.sim.volume)
+        for _ in range(COMPACT_MAX_STINTS):
+            self._advance(stint, progress)
+            prev, phi = phi, self._vs / float(self.sim.volume)
+            if abs(phi - prev) < COMPACT_TOL * phi:
+                break
+        self.sim.set_stress(float(self.p_ext), float(self.tau_ratio * self.p_ext))
+        self.shear_start_time = float(self.sim.time)
 
     @classmethod
     def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
@@ -226,20 +262,22 @@ class ShearCell:
     def run(self, steps: int, progress: bool | None = None,
             checkpoint: str | os.PathLike[str] | None = None,
             checkpoint_every: int | None = None) -> None:
-        """Advance ``steps`` steps, sampling every ``sample_every`` steps; ``checkpoint`` and
-        ``checkpoint_every`` as :class:`granflow.scenes.Scene` says."""
+        """Advance ``steps`` steps, sampling every ``sample_every`` steps (a "compacted" start
+        compacts first, see :meth:`prepare`); ``checkpoint`` and ``checkpoint_every`` as
+        :class:`granflow.scenes.Scene` says."""
+        self.prepare(progress)
+        run_with_checkpoints(self, steps, lambda n: self._advance(n, progress), checkpoint,
+                             checkpoint_every)
 
+    def _advance(self, steps: int, progress: bool | None) -> None:
         def after_chunk() -> None:
             self._tables.drain(self.sim)
             self.phi_max = max(self.phi_max, self._vs / float(self.sim.volume))
 
-        def advance(steps: int) -> None:
-            try:
-                run_chunked(self.sim, steps, progress, self, after_chunk=after_chunk)
-            except InstabilityError as exc:
-                raise InstabilityError(f"{exc}; {self.state_context()}") from exc
-
-        run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
+        try:
+            run_chunked(self.sim, steps, progress, self, after_chunk=after_chunk)
+        except InstabilityError as exc:
+            raise InstabilityError(f"{exc}; {self.state_context()}") from exc
 
     def state_context(self) -> str:
         """The cell's state in words, appended to a kernel InstabilityError: phi now and its
@@ -292,10 +330,18 @@ class ShearCell:
     def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
         # closed rows go to the tables first: the checkpoint carries the sampler's state
         self._tables.drain(self.sim)
-        self.sim.save_checkpoint(os.fspath(path), "{}")
+        self.sim.save_checkpoint(os.fspath(path),
+                                 json.dumps({"shear_start_time": self.shear_start_time}))
 
     def restore(self, path: str | os.PathLike[str]) -> None:
+        """The kernel state of ``path``; a checkpoint is written by :meth:`run`, after the
+        compaction, so the restored cell shears at tau_ext (from ``shear_start_time``, kept in
+        the checkpoint's header)."""
         self.sim.load_checkpoint(os.fspath(path))
+        meta = json.loads(_core.read_checkpoint_header(os.fspath(path))[1] or "{}")
+        t = meta.get("shear_start_time")
+        self.shear_start_time = float(t) if t is not None else float(self.sim.time)
+        self.sim.set_stress(float(self.p_ext), float(self.tau_ratio * self.p_ext))
 
 
 # --------------------------------------------------------------------------------------------

@@ -47,6 +47,9 @@ if TYPE_CHECKING:
     from granflow.scenes import Scene
 
 DEFAULT_FRACS: tuple[int, ...] = (10, 20, 50, 100, 200)
+#: the cell's (:func:`sheared_packing_study`): its t_c is the mean pair's, and the kernel
+#: refuses dt > t_c/10 of the lightest pair (d = 0.9: t_c/11.8 of the mean pair)
+CELL_FRACS: tuple[int, ...] = (12, 20, 50, 100, 200)
 
 SCHEMA = {
     "dt_label": pl.Utf8,
@@ -425,7 +428,7 @@ def _cell_class() -> type[Scene]:
 def sheared_packing_study(
     params: Mapping[str, Any] | None = None,
     observables: Mapping[str, Observable] | Sequence[str] = ("mu1", "phi", "I"),
-    fracs: Sequence[float] = DEFAULT_FRACS,
+    fracs: Sequence[float] = CELL_FRACS,
     time_tc: float = 1000.0,
     *,
     warmup_tc: float = 1000.0,
@@ -434,7 +437,9 @@ def sheared_packing_study(
     threads: int | None = None,
 ) -> pl.DataFrame:
     """:func:`scene_study` on a sheared packing in the stress-controlled cell
-    (``granflow.scenes.cell.ShearCell``, paper 002, whose ``dt = dt_frac t_c`` with 002's ``t_c``).
+    (``granflow.scenes.cell.ShearCell``, paper 002, whose ``dt = dt_frac t_c`` with the cell's
+    ``t_c``, the collision time of two mean particles; the default ``fracs`` start at 12, since
+    the kernel refuses dt above t_c/10 of its lightest pair, ~t_c/11.8 of the mean pair).
 
     Every timestep ``t_c/f`` runs the same scene (same seed: the same dilute start) at
     ``dt_frac = 1/f``: ``warmup_tc`` contact times of compaction and start-up of the shear
