@@ -11,8 +11,8 @@ import copy
 import itertools
 import multiprocessing
 import os
-from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -77,6 +77,45 @@ def _one(spec: dict[str, Any], directory: str, threads: int) -> dict[str, Any]:
     return row
 
 
+def map_tasks(fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],
+              workers: int | None = None,
+              scheduler: str | Any | None = None) -> Iterator[tuple[int, Any]]:
+    """``fn(*a, threads)`` for every ``a`` in ``args``, yielded as ``(index, result)`` as each
+    finishes (so a caller can keep every finished result when the rest is stopped).
+
+    Locally ``workers`` processes (default: one per core, at most one per task), each run with
+    cores/workers threads; with ``scheduler`` (a Dask scheduler address or a
+    ``distributed.Client``) there, one thread each."""
+    if not args:
+        return
+    if scheduler is not None:
+        from distributed import Client
+        from distributed import as_completed as dask_completed
+
+        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+        try:
+            futs = {client.submit(fn, *a, 1, pure=False): i for i, a in enumerate(args)}
+            for fut in dask_completed(futs):
+                yield futs[fut], fut.result()
+        finally:
+            if client is not scheduler:
+                client.close()
+        return
+    ncores = os.cpu_count() or 1
+    workers = workers or min(ncores, len(args))
+    threads = max(1, ncores // workers)
+    if workers == 1:
+        for i, a in enumerate(args):
+            yield i, fn(*a, threads)
+        return
+    # spawn, not fork: forking a process whose Rust thread pool is running deadlocks
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+        pending = {ex.submit(fn, *a, threads): i for i, a in enumerate(args)}
+        for fut in as_completed(pending):
+            yield pending[fut], fut.result()
+
+
 def run_grid(
     base: Mapping[str, Any],
     grid: Mapping[str, Sequence[Any]],
@@ -93,27 +132,9 @@ def run_grid(
     tasks = expand(base, grid, seeds)
     root = Path(root)
     dirs = [str(hive_dir(root, part)) for part, _ in tasks]
-    ncores = os.cpu_count() or 1
-    if scheduler is not None:
-        from distributed import Client
-
-        client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
-        futs = [
-            client.submit(_one, spec, dd, 1, pure=False)
-            for (_, spec), dd in zip(tasks, dirs, strict=True)
-        ]
-        rows = client.gather(futs)
-        if client is not scheduler:
-            client.close()
-    else:
-        workers = workers or min(ncores, len(tasks))
-        threads = max(1, ncores // workers)
-        if workers == 1:
-            rows = [_one(spec, dd, threads) for (_, spec), dd in zip(tasks, dirs, strict=True)]
-        else:
-            # spawn, not fork: forking a process whose Rust thread pool is running deadlocks
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-                rows = list(ex.map(_one, [s for _, s in tasks], dirs, [threads] * len(tasks)))
+    rows: list[dict[str, Any]] = [{} for _ in tasks]
+    args = [(spec, dd) for (_, spec), dd in zip(tasks, dirs, strict=True)]
+    for i, row in map_tasks(_one, args, workers=workers, scheduler=scheduler):
+        rows[i] = row
     parts = [part for part, _ in tasks]
     return pl.DataFrame([{**p, **r} for p, r in zip(parts, rows, strict=True)])
