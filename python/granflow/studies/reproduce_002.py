@@ -84,6 +84,8 @@ RATIOS: dict[float, tuple[float, ...]] = {
     0.1: (0.25, 0.3, 0.35, 0.4, 0.45, 0.5),
     0.3: (0.4, 0.45, 0.5, 0.55, 0.6, 0.65),
 }
+#: lower pressures at mu_s = 0.3 (one seed)
+LOWER_P: dict[float, tuple[float, ...]] = {1e-5: (0.45, 0.5, 0.55), 1e-6: (0.5, 0.55)}
 #: ratios added after the first pass: nearer yield at mu_s = 0.3, to pin mu1_0 (run last)
 NEAR_YIELD: dict[float, tuple[float, ...]] = {0.3: (0.36, 0.38)}
 RUNAWAY: dict[float, float] = {0.0: 0.5, 0.01: 0.5, 0.1: 0.6, 0.3: 0.7}
@@ -96,8 +98,8 @@ MORE_RATIOS: dict[float, tuple[float, ...]] = {
 
 def full_plan() -> Plan:
     """mu_s in {0, 0.01, 0.1, 0.3} at N = 2000 (seed 1, then seed 2), a runaway probe per mu_s,
-    N = 10,000 at mu_s = 0.3 (the size effect), mu_s in {0.03, 0.2} (two seeds), then two
-    ratios nearer yield at mu_s = 0.3."""
+    N = 10,000 at mu_s = 0.3 (the size effect), mu_s in {0.03, 0.2} (two seeds), two ratios
+    nearer yield at mu_s = 0.3, then p_ext = 1e-5 and 1e-6 at mu_s = 0.3 (one seed)."""
     pts: list[Point] = []
     for seed in (1, 2):
         pts += [Point(mu, r, seed) for mu, rs in RATIOS.items() for r in rs]
@@ -107,6 +109,8 @@ def full_plan() -> Plan:
         pts += [Point(mu, r, seed) for mu, rs in MORE_RATIOS.items() for r in rs]
     for seed in (1, 2):
         pts += [Point(mu, r, seed) for mu, rs in NEAR_YIELD.items() for r in rs]
+    # is the offset from 002's curves the pressure? (its fits pool 1e-4, 1e-5, 1e-6)
+    pts += [Point(0.3, r, 1, p_ext=p) for p, rs in LOWER_P.items() for r in rs]
     return Plan("full", tuple(pts), max_shear_steps={2000: 1_500_000, 10_000: 400_000})
 
 

@@ -36,8 +36,8 @@ UNDETERMINED = 0.5
 def discussion(off: pl.DataFrame) -> str:
     """Why the rows differ, as far as measured: the offsets of ``off`` (:func:`offsets`) and
     what docs/cell.md and benchmarks/NOTES_lammps.md show."""
-    def at(mu: float, col: str) -> str:
-        r = off.filter(pl.col("mu_s") == mu)
+    def at(mu: float, col: str, p: float = P_MAIN) -> str:
+        r = off.filter((pl.col("mu_s") == mu) & ((pl.col("p_ext") / p - 1).abs() < 1e-9))
         if not r.height:
             return "(no data)"
         return f"{r[f'{col} - paper'][0]:+.4f} +- {r[f'{col} - paper SE'][0]:.4f}"
@@ -50,10 +50,11 @@ def discussion(off: pl.DataFrame) -> str:
   gives on the same material and state (+0.015 in mu1, +0.008 in phi at tau/p = 0.42,
   benchmarks/NOTES_lammps.md): not an error of this code. Ruled out as the cause: the reading
   of t_c (collision against printed moves I by -1.9 % +- 1.6 % and mu1, phi not at all,
-  docs/cell.md) and the system size (the N = 10,000 rows below). Not tested on this machine:
-  the lower pressures. 002's fits pool p = 1e-4, 1e-5 and 1e-6 and take the quasi-static
-  constants from the low pressures (§4), where the grains are relatively stiffer; whether that
-  accounts for the offset is the first question for the paper-scale recipe below.
+  docs/cell.md) and the system size (the N = 10,000 rows below). 002's fits pool p = 1e-4,
+  1e-5 and 1e-6 (§4); at mu_s = 0.3 the offset of mu1 is {at(0.3, "mu1", 1e-5)} at
+  p = 1e-5 and {at(0.3, "mu1", 1e-6)} at 1e-6 (phi: {at(0.3, "phi", 1e-5)},
+  {at(0.3, "phi", 1e-6)}): the rows above say whether the pressure (the grains' relative
+  stiffness) is the parameter behind it.
 * **Correlated constants.** A three-constant power law over 1-1.5 decades of I leaves
   (mu1_0, A1, alpha1) strongly correlated: an intercept too low comes with an exponent too low
   and an A too high. A row whose constants differ one by one can still trace the paper's
@@ -79,10 +80,19 @@ def pooled(points: pl.DataFrame) -> pl.DataFrame:
     return rh.pool_realizations(flow.select(keep), list(KEYS))
 
 
+#: the campaign's pressure (the fits and figures use it; other pressures are compared apart)
+P_MAIN = 1e-4
+
+
+def main_set(pool: pl.DataFrame, n: int) -> pl.DataFrame:
+    """The points at ``N = n`` and p_ext = P_MAIN."""
+    return pool.filter((pl.col("N") == n) & ((pl.col("p_ext") / P_MAIN - 1).abs() < 1e-9))
+
+
 def fits_by_mu(pool: pl.DataFrame, n: int = 2000) -> dict[float, dict[str, rh.FitResult]]:
-    """The four laws fitted per mu_s at ``N = n`` (SEs of I propagated)."""
+    """The four laws fitted per mu_s at ``N = n``, p_ext = P_MAIN (SEs of I propagated)."""
     out = {}
-    for (mu,), g in pool.filter(pl.col("N") == n).group_by(["mu_s"], maintain_order=True):
+    for (mu,), g in main_set(pool, n).group_by(["mu_s"], maintain_order=True):
         out[float(mu)] = rh.fit_all(g, include_x_errors=True, states=None)
     return dict(sorted(out.items()))
 
@@ -149,12 +159,13 @@ def table1_markdown(rows: pl.DataFrame) -> str:
 
 
 def offsets(pool: pl.DataFrame, n: int = 2000) -> pl.DataFrame:
-    """Per mu_s with the paper's complete laws (0 and 0.3): how far our points lie from the
-    paper's curves at our own I, for mu1 (4.2) and phi (4.7): the inverse-variance mean of
-    (ours - paper(I)) with its SE, and the number of points."""
+    """Per mu_s with the paper's complete laws (0 and 0.3) and pressure: how far our points
+    lie from the paper's curves at our own I, for mu1 (4.2) and phi (4.7): the
+    inverse-variance mean of (ours - paper(I)) with its SE, and the number of points."""
     rows = []
-    for (mu,), g in pool.filter(pl.col("N") == n).group_by(["mu_s"], maintain_order=True):
-        row: dict[str, Any] = {"mu_s": float(mu), "points": g.height}
+    for (mu, p), g in pool.filter(pl.col("N") == n).group_by(["mu_s", "p_ext"],
+                                                               maintain_order=True):
+        row: dict[str, Any] = {"mu_s": float(mu), "p_ext": float(p), "points": g.height}
         for col in ("mu1", "phi"):
             try:
                 ref = rh.reference_curve(col, g["I"].to_numpy(), float(mu))
@@ -171,7 +182,7 @@ def offsets(pool: pl.DataFrame, n: int = 2000) -> pl.DataFrame:
             row[f"{col} - paper SE"] = float(1.0 / np.sqrt(np.sum(w)))
         if row:
             rows.append(row)
-    return pl.DataFrame(rows).sort("mu_s") if rows else pl.DataFrame()
+    return pl.DataFrame(rows).sort(["mu_s", "p_ext"]) if rows else pl.DataFrame()
 
 
 def plot_figures(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
@@ -289,7 +300,8 @@ def paper_scale_estimate(points: pl.DataFrame, rate: float,
     of our flowing N = 2000 points at p = 1e-4, times sqrt(1e-4/p) (a strain rate
     I sqrt(p/rho)/a takes that much longer per strain), the same count at N = 1e4 (its smaller
     fluctuations would need fewer: an upper estimate)."""
-    flow = points.filter((pl.col("state") == "flowing") & (pl.col("N") == 2000))
+    flow = points.filter((pl.col("state") == "flowing") & (pl.col("N") == 2000)
+                         & ((pl.col("p_ext") / P_MAIN - 1).abs() < 1e-9))
     steps = float(flow["shear_steps"].median()) if flow.height else math.nan  # type: ignore[arg-type]
     total = sum(p.N * steps * math.sqrt(1e-4 / p.p_ext) for p in paper)
     return {"runs": len(paper), "median steps at p = 1e-4": steps,
@@ -307,7 +319,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
     fits = fits_by_mu(pool, n_main)
     rows = table_rows(fits)
     figdir = path.parent / f"{path.stem}_figures"
-    figs = plot_figures(pool, fits, figdir, n_main)
+    figs = plot_figures(pool.filter((pl.col("p_ext") / P_MAIN - 1).abs() < 1e-9), fits, figdir,
+                        n_main)
     if se.height:
         figs.append(plot_se_vs_time(se, figdir / "se_vs_time.png"))
     per, rate = cost(points)
@@ -340,7 +353,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   "Where 002 gives all of a law's constants (mu_s = 0 and 0.3, §4), the mean "
                   "distance of our points from its curve at our own I (inverse-variance "
                   "weighted, the SE of I propagated through the curve's slope):", "",
-                  _md_table(off, {c: ".4f" for c in off.columns if c != "mu_s"}), "",
+                  _md_table(off, {**{c: ".4f" for c in off.columns if c != "mu_s"},
+                                  "p_ext": ".0e"}), "",
                   discussion(off), ""]
     lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
     big = pool.filter(pl.col("N") == 10_000)
