@@ -155,7 +155,8 @@ def _analyse(s: pl.DataFrame) -> dict[str, Any]:
 
     cols = [c for c in OBSERVABLES if c in s.columns]
     res = rh.analyse_run(s, columns=cols)
-    out: dict[str, Any] = {"state": res.state.state, "t_start": res.state.t_start}
+    out: dict[str, Any] = {"state": res.state.state, "t_start": res.state.t_start,
+                           "T_avg": float(s["t"][-1] - res.state.t_start)}
     for r in res.stats.iter_rows(named=True):
         o = r["observable"]
         out[o], out[f"{o}_se"], out[f"{o}_tau"] = r["mean"], r["se"], r["tau"]
@@ -170,10 +171,17 @@ ARREST_STINTS = 4
 SE_TARGETS = {"mu1": 1.0, "phi": 1.0, "I": 3.0}
 
 
+#: shear strain (2 |D| T, engineering) the steady part must span: an SE target is easily met
+#: by a short stretch of a slow flow (p = 1e-5 met it after 0.3 of strain, still dilating)
+MIN_STRAIN = 2.0
+
+
 def _converged(row: Mapping[str, Any], target: float) -> bool:
-    return row["state"] == "flowing" and all(
-        math.isfinite(row.get(f"{k}_se", math.nan))
-        and row[f"{k}_se"] <= f * target * abs(row[k]) for k, f in SE_TARGETS.items())
+    return (row["state"] == "flowing"
+            and 2.0 * row.get("shear_rate", 0.0) * row.get("T_avg", 0.0) >= MIN_STRAIN
+            and all(math.isfinite(row.get(f"{k}_se", math.nan))
+                    and row[f"{k}_se"] <= f * target * abs(row[k])
+                    for k, f in SE_TARGETS.items()))
 
 
 def _se_rows(point: Point, s: pl.DataFrame, t_start: float) -> list[dict[str, Any]]:
@@ -340,7 +348,7 @@ def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = 
         se_rows = row.pop("se_rows")
         _write(outp / "points.parquet", [row], append=True)
         _write(outp / "se_vs_time.parquet", se_rows, append=True)
-        log(f"  {Point(row['mu_s'], row['tau_ratio'], row['seed'], row['N']).key}: "
+        log(f"  {Point(row['mu_s'], row['tau_ratio'], row['seed'], row['N'], row['p_ext']).key}: "
             f"{row.get('state')}, I = {row.get('I', math.nan):.4g}, phi = "
             f"{row.get('phi', math.nan):.4f}, {row['shear_steps']} steps, "
             f"{row['wall_seconds']:.0f} s")
