@@ -28,8 +28,9 @@ def test_points_reach_their_se_targets_and_are_kept(quick):
         assert r["state"] == "flowing", r
         assert r["converged"] or r["shear_steps"] >= plan.max_steps(r["N"])
         if r["converged"]:
-            for k, f in rp.SE_TARGETS.items():
-                assert r[f"{k}_se"] <= f * plan.se_target * abs(r[k])
+            for k, t in plan.targets().items():
+                assert r[f"{k}_se"] <= t * abs(r[k])
+            assert 2 * r["shear_rate"] * r["T_avg"] >= plan.min_strain
         assert r["wall_seconds"] > 0 and math.isfinite(r["I"])
     # a faster flow at a larger stress ratio, and a looser packing (002 figs. 3, 6)
     d = d.sort("tau_ratio")

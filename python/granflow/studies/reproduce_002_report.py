@@ -87,9 +87,6 @@ def pooled(points: pl.DataFrame) -> pl.DataFrame:
     return rh.pool_realizations(flow.select(keep), list(KEYS))
 
 
-#: what the campaign asks of a point's steady part before its SE counts (reproduce_002)
-MIN_STRAIN_NOTE = "a shear strain of 2 or more"
-
 #: the campaign's pressure (the fits and figures use it; other pressures are compared apart)
 P_MAIN = 1e-4
 
@@ -384,8 +381,10 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              "diameters uniform in [0.9, 1.1], dt = 0.02 t_c, compacted start), p_ext = "
              + ", ".join(f"{p:.0e}" for p in sorted(set(points["p_ext"].to_list()),
                                                    reverse=True))
-             + f" kn/a, each until the blocking SE of mu1 and phi is within {plan.se_target:.0%} "
-             f"of the mean and that of I within {3 * plan.se_target:.0%} (or "
+             + f" kn/a, each until its steady part spans a shear strain of {plan.min_strain:g} "
+             "and the blocking SE of each of "
+             + ", ".join(f"{k} is within {t:.0%}" for k, t in plan.targets().items())
+             + " of its mean (or "
              f"{plan.max_steps(n_main):,} steps of shear at N = {n_main}). States: "
              + ", ".join(f"{k} {v}" for k, v in sorted(
                  points["state"].value_counts().iter_rows())) + ".", "",
@@ -451,7 +450,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   "stretch's SE is too small: it sees only the correlations shorter than "
                   "itself (the slow volume mode needs a stretch of many of its correlation "
                   "times). A point's SE is trusted when its steady part spans "
-                  f"{MIN_STRAIN_NOTE} and its blocking converged; shorter stretches are for "
+                  f"a shear strain of {plan.min_strain:g} and its blocking converged; shorter "
+                  "stretches are for "
                   "this table only.", "", _md_table(se_shrink(se), {}), ""]
     est = paper_scale_estimate(points, rate, paper)
     lines += ["## Cost", "",
