@@ -11,6 +11,7 @@ import copy
 import itertools
 import multiprocessing
 import os
+import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import fields, is_dataclass
@@ -77,6 +78,17 @@ def _one(spec: dict[str, Any], directory: str, threads: int) -> dict[str, Any]:
     return row
 
 
+def _die_with_parent() -> None:
+    """A pool worker's start: ask Linux to end it with its parent. A parent killed outright
+    (SIGTERM, SIGKILL) leaves its workers running their tasks otherwise, orphans that go on
+    writing the same run directories as the next sweep (found with a stopped campaign)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None).prctl(1, int(signal.SIGTERM))  # 1 = PR_SET_PDEATHSIG
+
+
 def map_tasks(fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],
               workers: int | None = None,
               scheduler: str | Any | None = None) -> Iterator[tuple[int, Any]]:
@@ -110,7 +122,8 @@ def map_tasks(fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],
         return
     # spawn, not fork: forking a process whose Rust thread pool is running deadlocks
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                             initializer=_die_with_parent) as ex:
         pending = {ex.submit(fn, *a, threads): i for i, a in enumerate(args)}
         for fut in as_completed(pending):
             yield pending[fut], fut.result()
