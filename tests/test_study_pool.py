@@ -9,9 +9,9 @@ import sys
 import time
 from pathlib import Path
 
+import granflow
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = """
 import os, time
 from granflow.study import map_tasks
@@ -30,7 +30,8 @@ if __name__ == "__main__":
 def test_workers_end_with_a_killed_parent(tmp_path):
     script = tmp_path / "pool.py"
     script.write_text(SCRIPT)
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "python")}
+    # the granflow this test imports (installed, or the source tree with its extension)
+    env = {**os.environ, "PYTHONPATH": str(Path(granflow.__file__).resolve().parents[1])}
     proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True,
                             env=env)
     assert proc.stdout is not None
