@@ -56,7 +56,9 @@ def _law(kn: float, e_n: float, mu: float, kt: float | None, ratio: float, form:
 @register("channel")
 @dataclass
 class Channel:
-    """Vertical channel scene; every parameter has the paper's default (000 §2, App. A)."""
+    """Vertical channel scene. The material and contact law are 000's (§2, App. A); the
+    geometry defaults are a reduced channel for quick runs, not the paper's: 000 runs
+    W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set them for its scale."""
 
     W: float = 20.0
     H: float = 30.0
