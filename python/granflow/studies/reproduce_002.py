@@ -187,22 +187,20 @@ def _converged(row: Mapping[str, Any], plan: Plan) -> bool:
 
 
 def _se_rows(point: Point, s: pl.DataFrame, t_start: float) -> list[dict[str, Any]]:
-    """SE of I, phi, mu1 over the first fractions of the steady part (error against time)."""
-    from granflow.analysis import rheology as rh
+    """SE of I, phi, mu1 over the first fractions of the steady part (error against time;
+    stats.se_vs_time per observable, each row with its averaging time T)."""
+    from granflow.analysis.stats import se_vs_time
 
-    st = s.filter(pl.col("t") >= t_start)
-    rows = []
-    for f in SE_FRACTIONS:
-        part = st.head(max(2, int(f * st.height)))
-        if part.height < 64:
-            continue
-        res = rh.analyse_run(part, columns=list(SE_COLUMNS), start=0)
-        row = {**asdict(point), "fraction": f,
-               "T_avg": float(part["t"][-1] - part["t"][0])}
-        for r in res.stats.iter_rows(named=True):
-            row[f"{r['observable']}_se"] = r["se"]
-        rows.append(row)
-    return rows
+    t = s["t"].to_numpy()
+    start = int(np.searchsorted(t, t_start))
+    rows: dict[float, dict[str, Any]] = {}
+    for col in SE_COLUMNS:
+        tab = se_vs_time(t, s[col].to_numpy(), fractions=SE_FRACTIONS, start=start).table
+        for r in tab.iter_rows(named=True):
+            row = rows.setdefault(r["fraction"], {**asdict(point), "fraction": r["fraction"],
+                                                  "T_avg": r["T"]})
+            row[f"{col}_se"] = r["se"]
+    return list(rows.values())
 
 
 def point_row(point: Point, plan: Plan, series: pa.Table, shear0: float) -> dict[str, Any]:

@@ -269,7 +269,7 @@ def plot_figures(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitRes
     return paths
 
 
-def plot_se_vs_time(se: pl.DataFrame, path: Path) -> Path:
+def plot_campaign_se(se: pl.DataFrame, path: Path) -> Path:
     """SE of I, phi, mu1 against the averaging time, every point a line, with T^-1/2."""
     from matplotlib.figure import Figure
 
@@ -367,7 +367,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
     figs = plot_figures(pool.filter((pl.col("p_ext") / P_MAIN - 1).abs() < 1e-9), fits, figdir,
                         n_main)
     if se.height:
-        figs.append(plot_se_vs_time(se, figdir / "se_vs_time.png"))
+        figs.append(plot_campaign_se(se, figdir / "se_vs_time.png"))
     per, rate = cost(points)
     rel = path.parent
     lines = [f"# Reproducing 002: Table 1 and figures 3-8 ({plan.name} campaign)", "",
