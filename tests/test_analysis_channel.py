@@ -140,6 +140,32 @@ def test_zones(run):
     assert abs(z["phi_plug"]["value"] - phi_plug_true) < 4 * z["phi_plug"]["se"] + 1e-5
 
 
+def test_zone_means_weight_bins_by_width():
+    tab, _ = synthetic_bins()
+    prof = cp.profiles(tab)
+    zn = ch.zones(prof)
+    means = ch.zone_means(prof, zn)
+    q = prof.derived()
+    width = prof.xi_hi - prof.xi_lo
+    for zone, est in means.items():
+        idx = np.array([i for i, lab in enumerate(zn.labels) if lab == zone])
+        assert est["phi"].value == pytest.approx(np.average(q["phi"][idx], weights=width[idx]))
+        assert 0 < est["phi"].se < 0.01
+    # phi rises from the wall to the plug (phi_profile), so do the zone means
+    assert means["wall"]["phi"].value < means["dense"]["phi"].value < means["plug"]["phi"].value
+
+
+def test_fit_phi_ad_recovers_the_divergence():
+    rng = np.random.default_rng(3)
+    phi = np.linspace(0.45, 0.58, 10)
+    y = 2.0 / (0.59 - phi) * (1 + 0.03 * rng.standard_normal(phi.size))
+    f = ch.fit_phi_ad(phi, y, 0.03 * np.abs(y))
+    assert abs(f["phi_ad"] - 0.59) < 3 * f["phi_ad_se"] and f["phi_ad_se"] < 0.003
+    assert f["n"] == 10 and f["chi2_per_dof"] < 3
+    # too few bins: no fit
+    assert np.isnan(ch.fit_phi_ad(phi[:2], y[:2], y[:2] * 0.03)["phi_ad"])
+
+
 def test_conduction_length_and_kinetic_coefficients(run):
     s, truth = run
     lc = s["conduction"]["l_c"]

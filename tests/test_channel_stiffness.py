@@ -37,7 +37,7 @@ def test_prepare_from_reuses_the_packing():
         Channel(**{**geo, "W": 12.0}, kn=1e5, threads=1).prepare_from(src)
     # a run packing is not a prepared one
     with pytest.raises(ParameterError, match="step"):
-        Channel(**geo, kn=1e7, threads=1).prepare_from(soft)
+        Channel(**geo, kn=1e7, dt=3.79e-5, threads=1).prepare_from(soft)
 
 
 def test_bench_compare_bin_by_bin():

@@ -26,7 +26,7 @@ RTOL = 1e-11
 
 
 def small_channel(**kw) -> Channel:
-    base = dict(W=8, H=12, B=4, phi_bar=0.63, kn=1e5, dt=3e-4, seed=2, sample_every=5,
+    base = dict(W=8, H=12, B=4, phi_bar=0.61, kn=1e5, dt=3e-4, seed=2, sample_every=5,
                 window=4)
     return Channel(**{**base, **kw})
 

@@ -573,3 +573,64 @@ def summary(
     )
     out["profile_errors"] = pe.whole
     return out
+
+
+@quiet
+def zone_means(
+    prof: ChannelProfiles, zn: Zones, keys: tuple[str, ...] = ("phi", "u", "abs_dudx", "T")
+) -> dict[str, dict[str, Estimate]]:
+    """Mean of each half-profile quantity in ``keys`` over the bins of each zone (plug, dense,
+    loose, wall), weighted by bin width, with its jackknife SE (the bins of a zone are
+    correlated: their mean is re-averaged per jackknife replicate, not combined per bin).
+    The quantities compared across k_n in 000 fig. 10."""
+    width = prof.xi_hi - prof.xi_lo
+    out: dict[str, dict[str, Estimate]] = {}
+    for zone in ("plug", "dense", "loose", "wall"):
+        idx = np.array([i for i, lab in enumerate(zn.labels) if lab == zone], dtype=np.int64)
+        if idx.size == 0:
+            continue
+        w = width[idx] / np.sum(width[idx])
+
+        def mean(q: Mapping[str, FloatArray], idx: npt.NDArray[np.int64] = idx,
+                 w: FloatArray = w) -> FloatArray:
+            return np.array([float(np.sum(w * q[k][idx])) for k in keys])
+
+        v, s = prof.estimate(mean)
+        out[zone] = {k: Estimate(float(v[j]), float(s[j])) for j, k in enumerate(keys)}
+    return out
+
+
+@quiet
+def fit_phi_ad(phi: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike) -> dict[str, float]:
+    """Fit ``y = A / (phi_ad - phi)`` (000 fig. 13: the kinetic coefficients p_phi, mu_phi,
+    D_phi of the loose shearing zone diverge as chi = (phi_ad - phi)^-1; the paper finds
+    phi_ad = 0.59 +- 0.002) to loose-zone bins, in log y (the coefficients span decades)
+    weighted by the per-bin relative SE. Returns phi_ad, its SE (covariance scaled by
+    sqrt(chi2/dof) where that exceeds 1), A, chi2_per_dof and n; NaN with fewer than 3 bins."""
+    ph = np.asarray(phi, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    ee = np.asarray(y_se, dtype=np.float64)
+    ok = np.isfinite(ph) & np.isfinite(yy) & (yy > 0) & np.isfinite(ee) & (ee > 0)
+    ph, yy, ee = ph[ok], yy[ok], ee[ok]
+    nan = {"phi_ad": math.nan, "phi_ad_se": math.nan, "A": math.nan,
+           "chi2_per_dof": math.nan, "n": int(ph.size)}
+    if ph.size < 3:
+        return nan
+    sig = ee / yy
+
+    def model(p: FloatArray, log_a: float, phi_ad: float) -> FloatArray:
+        return log_a - np.log(np.maximum(phi_ad - p, 1e-12))
+
+    lo = float(np.max(ph)) + 1e-6
+    try:
+        popt, pcov = optimize.curve_fit(
+            model, ph, np.log(yy), p0=(float(np.log(np.median(yy) * 0.01)), lo + 0.005),
+            sigma=sig, absolute_sigma=True, bounds=([-np.inf, lo], [np.inf, PHI_RCP]),
+            maxfev=20000)
+    except (RuntimeError, ValueError):
+        return nan
+    chi2 = float(np.sum(((np.log(yy) - model(ph, *popt)) / sig) ** 2))
+    dof = max(1, ph.size - 2)
+    scale = math.sqrt(max(1.0, chi2 / dof))
+    return {"phi_ad": float(popt[1]), "phi_ad_se": float(math.sqrt(pcov[1, 1]) * scale),
+            "A": float(math.exp(popt[0])), "chi2_per_dof": chi2 / dof, "n": int(ph.size)}

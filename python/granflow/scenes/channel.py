@@ -11,11 +11,15 @@ with period H. Protocol details that the paper leaves open, and our choices:
   bed is settled when the kinetic energy per particle is below ``settle_ke`` m g d; friction and
   the run's stiffness, restitution and dt apply from the release on (all tangential histories
   start at zero at the release);
-* a frictionless pour packs to ~0.64, so every phi_bar up to random close packing can be made;
-  the soft pour's overlaps are then relaxed at the run's kn (1000 damped steps, velocities
+* the soft pour's overlaps are relaxed at the run's kn (1000 damped steps, velocities
   quenched) so that a stiff run does not start with stored elastic energy;
   if the settled bed is taller than H (phi_bar close to the packing fraction) it is compressed
-  affinely into [0, H) and relaxed without gravity before the release;
+  affinely into [0, H) and relaxed without gravity before the release; if that relaxation
+  leaves overlaps >= 0.01 d the packing cannot hold phi_bar (the densest bed depends on the
+  channel's size: the pour packs to ~0.57-0.59 up to its rough top in channels 8-10 d wide,
+  ~0.61 at W = 20 d; squeezed to 0.63 the bed keeps overlaps of 0.017-0.019 d at W = 8-10 d,
+  0.008 d at W = 20 d)
+  and ``prepare`` refuses phi_bar (docs/channel.md, "Input checks");
 * the achieved phi_bar is exact: (total particle volume) / (W H B) with whole particles.
 
 Statistics (000 eqs 2.1–2.5) are taken inside the kernel's step loop (``granflow._core``
@@ -32,6 +36,8 @@ from __future__ import annotations
 
 import json
 import os
+import sys
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
@@ -46,7 +52,30 @@ from granflow.sizes import SizeDist, discrete
 
 from ._base import SampleTables, check_keys, register, run_with_checkpoints
 
+#: random close packing: no phi_bar above it can be packed (refused on construction); below it
+#: the densest bed the fill and release reaches depends on the channel's size, so ``prepare``
+#: refuses a phi_bar whose squeezed bed keeps overlaps >= PREP_MAX_OVERLAP d
 RCP = 0.64
+PREP_MAX_OVERLAP = 0.01
+
+
+class _Stages:
+    """The preparation's stages, one line each on stderr (when ``progress``, or None and
+    stderr is a terminal) with the wall seconds since the start; a call returns them."""
+
+    def __init__(self, progress: bool | None) -> None:
+        self.show = sys.stderr.isatty() if progress is None else bool(progress)
+        self.t0 = time.perf_counter()
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def __call__(self, msg: str) -> float:
+        t = self.elapsed
+        if self.show:
+            print(f"[channel preparation {t:7.1f} s] {msg}", file=sys.stderr, flush=True)
+        return t
 
 
 def _law(kn: float, e_n: float, mu: float, kt: float | None, ratio: float, form: str) -> ContactLaw:
@@ -97,32 +126,92 @@ class Channel:
 
     # -- parameters ------------------------------------------------------------------------
     def _validate(self) -> None:
+        """Refuse bad input on construction, before anything runs (docs/channel.md, "Input
+        checks"); what only the preparation can tell (a phi_bar this channel cannot pack) is
+        refused by :meth:`prepare`."""
+
         def need(cond: bool, name: str, value: Any, allowed: str) -> None:
             if not cond:
                 raise ParameterError(f"invalid {name} = {value!r}: allowed {allowed}")
 
-        sd = self.size_dist()
-        dmax = sd.max
-        need(all(d > 0 for d in self.sizes) and all(f >= 0 for f in self.sizes.values())
+        def real(v: Any) -> bool:
+            return (isinstance(v, (int, float, np.integer, np.floating))
+                    and not isinstance(v, bool) and bool(np.isfinite(v)))
+
+        def positive(name: str) -> None:
+            v = getattr(self, name)
+            need(real(v) and v > 0, name, v, "a finite number > 0")
+
+        need(isinstance(self.sizes, Mapping) and len(self.sizes) > 0
+             and all(real(d) and d > 0 for d in self.sizes)
+             and all(real(f) and f >= 0 for f in self.sizes.values())
              and abs(sum(self.sizes.values()) - 1) < 1e-6,
              "sizes", self.sizes, "positive diameters with number fractions summing to 1")
-        need(np.isfinite(self.W) and self.W >= 5 * dmax, "W", self.W,
+        sd = self.size_dist()
+        dmax = sd.max
+        dmin = min(d for d, f in self.sizes.items() if f > 0)
+        for name in ("density", "kn", "skin", "settle_ke", "prep_kn"):
+            positive(name)
+        need(real(self.e_n) and 0 < self.e_n <= 1, "e_n", self.e_n, "0 < e_n <= 1")
+        need(real(self.mu) and self.mu >= 0, "mu", self.mu, "a finite number >= 0")
+        # a wall value left at None is the particle value; 0 is not "unset"
+        need(self.wall_kn is None or (real(self.wall_kn) and self.wall_kn > 0), "wall_kn",
+             self.wall_kn, "a finite number > 0, or None for kn")
+        need(self.wall_e_n is None or (real(self.wall_e_n) and 0 < self.wall_e_n <= 1),
+             "wall_e_n", self.wall_e_n, "0 < wall_e_n <= 1, or None for e_n")
+        need(self.wall_mu is None or (real(self.wall_mu) and self.wall_mu >= 0), "wall_mu",
+             self.wall_mu, "a finite number >= 0, or None for mu")
+        need(self.form in ("hooke", "hertz"), "form", self.form, "'hooke' or 'hertz'")
+        self.law.as_dict()  # kt, xi_t_ratio: the kernel's own checks, naming the field
+        need(isinstance(self.seed, (int, np.integer)) and not isinstance(self.seed, bool)
+             and self.seed >= 0, "seed", self.seed, "an integer >= 0")
+
+        # geometry: the kernel needs a periodic period >= 2 (d_max + skin)
+        need(real(self.W) and self.W >= 5 * dmax, "W", self.W,
              f">= 5 d_max = {5 * dmax:g} (a channel a few diameters wide)")
-        need(np.isfinite(self.H) and self.H >= 5 * dmax, "H", self.H, f">= {5 * dmax:g}")
-        need(np.isfinite(self.B) and self.B >= 2 * (dmax + self.skin) + 0.5, "B", self.B,
+        h_min = max(5 * dmax, 2 * (dmax + self.skin))
+        need(real(self.H) and self.H >= h_min, "H", self.H,
+             f">= max(5 d_max, 2 (d_max + skin)) = {h_min:g} (a periodic height a few "
+             "diameters tall)")
+        need(real(self.B) and self.B >= 2 * (dmax + self.skin) + 0.5, "B", self.B,
              f">= {2 * (dmax + self.skin) + 0.5:g} (two interaction ranges)")
-        need(0 < self.phi_bar <= RCP, "phi_bar", self.phi_bar,
-             f"0 < phi_bar <= {RCP} (above random close packing the spheres cannot be packed)")
-        need(self.dt > 0, "dt", self.dt, "> 0")
-        need(self.bin_width > 0 and self.wall_bin > 0 and self.W - 2 * self.wall_bin >= 0,
-             "bin_width/wall_bin", (self.bin_width, self.wall_bin),
-             "positive widths with 2 wall_bin <= W")
+        # bins: two wall bins and at least one interior bin of ~bin_width (bin_edges() would
+        # otherwise make one interior bin narrower than bin_width or, below half a bin, none:
+        # the right-hand "wall bin" then spans the interior too)
+        positive("bin_width")
+        positive("wall_bin")
+        interior = self.W - 2 * self.wall_bin
+        need(interior >= self.bin_width, "W/wall_bin/bin_width",
+             (self.W, self.wall_bin, self.bin_width),
+             f"W >= 2 wall_bin + bin_width = {2 * self.wall_bin + self.bin_width:g}, i.e. "
+             f"bin_width <= W - 2 wall_bin = {interior:g} (two wall bins and at least one "
+             "interior bin)")
+
+        need(real(self.phi_bar) and 0 < self.phi_bar <= RCP, "phi_bar", self.phi_bar,
+             f"0 < phi_bar <= {RCP} (above random close packing the spheres cannot be packed; "
+             "below it, prepare() refuses a phi_bar this channel's fill and release cannot "
+             "pack)")
+        vol = self.phi_bar * self.W * self.H * self.B
+        v_mean = sum(f * np.pi * d**3 / 6 for d, f in self.sizes.items())
+        # the preparation's own count (to the nearest whole particle, at least 1) when small
+        n = vol / v_mean if vol > 10 * v_mean else len(sd.diameters_for_volume(vol, self.seed))
+        need(n >= 2, "phi_bar", self.phi_bar,
+             f"a value that puts at least 2 particles in W H B = "
+             f"{self.W * self.H * self.B:g} (this one gives {n:g})")
+
+        # dt: the kernel refuses dt > t_c/10 of the run's law (stiffest, lightest pair) when
+        # the run's simulation is built, i.e. after the pour; refuse it here instead
+        need(real(self.dt) and self.dt > 0, "dt", self.dt, "a finite number > 0")
+        t_c = contact_time(self.law, np.array([dmin]), self.density)
+        need(self.dt <= t_c / 10, "dt", self.dt,
+             f"<= t_c/10 = {t_c / 10:.4g} (t_c = {t_c:.4g}, the contact time of the lightest "
+             f"pair, d = {dmin:g}, at kn = {self.kn:g}, e_n = {self.e_n:g}; beyond it the "
+             "integration is inaccurate or unstable)")
         need(self.sample_every is None
              or (isinstance(self.sample_every, int) and self.sample_every >= 1), "sample_every",
              self.sample_every, "an integer >= 1, or None for no statistics")
         need(isinstance(self.window, int) and self.window >= 1, "window", self.window,
              "an integer >= 1")
-        need(self.form in ("hooke", "hertz"), "form", self.form, "'hooke' or 'hertz'")
 
     def size_dist(self) -> SizeDist:
         return discrete({float(k): float(v) for k, v in self.sizes.items()})
@@ -167,6 +256,7 @@ class Channel:
         already (or restored from a checkpoint)."""
         if self.sim is not None:
             return
+        say = _Stages(progress)
         vol_target = self.phi_bar * self.W * self.H * self.B
         d = self.size_dist().diameters_for_volume(vol_target, self.seed)
         vs = float(np.sum(np.pi * d**3 / 6))
@@ -181,13 +271,16 @@ class Channel:
         sim = Simulation(x, d, box, prep_law, walls=walls, gravity=(0.0, -1.0, 0.0), dt=dt,
                          threads=self.threads, density=self.density, skin=self.skin)
         m = sim.core.masses()
-        t_max = 40.0 + 4 * np.sqrt(2 * h_fill)
+        say(f"inserted {len(d)} spheres at phi = {phi_ins} in a {self.W:g} x {h_fill:.4g} x "
+            f"{self.B:g} box; pouring (kn = {prep_law.kn:g}, frictionless, dt = {dt:.3g})")
+        t_fall = float(np.sqrt(2 * h_fill))
+        t_max = 40.0 + 4 * t_fall
         check = max(int(0.5 / dt), 1)
         ke = np.inf
         while sim.time < t_max:
-            sim.run(check, progress=progress)
+            sim.run(check, progress=False)
             ke = sim.energies()["kinetic_translational"] / len(d) / float(np.mean(m))
-            if ke < self.settle_ke and sim.time > np.sqrt(2 * h_fill):
+            if ke < self.settle_ke and sim.time > t_fall:
                 break
         else:
             raise ParameterError(
@@ -195,6 +288,9 @@ class Channel:
                 f"t = {t_max:.0f} sqrt(d/g) (kinetic energy per particle {ke:.2e} m g d); "
                 "allowed a larger value"
             )
+        settled = say(f"settled: kinetic energy per particle {ke:.2e} < settle_ke = "
+                      f"{self.settle_ke:g} m g d (after t >= sqrt(2 h_fill)) at t = "
+                      f"{sim.time:.1f} sqrt(d/g), {sim.step} steps")
         x = sim.get_positions()
         r = d / 2
         top = float(np.max(x[:, 1] + r))
@@ -209,8 +305,18 @@ class Channel:
             for _ in range(20):
                 rel.run(200, progress=False)
                 rel.set_velocities(np.zeros_like(x))
-                if rel.diagnostics()["max_overlap"] < 0.01:
+                overlap = rel.diagnostics()["max_overlap"]
+                if overlap < PREP_MAX_OVERLAP:
                     break
+            else:
+                # jammed: the bed cannot hold phi_bar in this channel without overlaps that
+                # a run would carry as a stiffness-set pressure (kn x overlap)
+                raise ParameterError(
+                    f"invalid phi_bar = {self.phi_bar!r}: allowed a value this channel's fill "
+                    f"and release can pack (squeezed into H = {self.H:g}, the bed still "
+                    f"overlaps by {overlap:.3f} d >= {PREP_MAX_OVERLAP} d after relaxation; "
+                    f"the pour reached {vs / (self.W * self.B * top):.3f} up to its top): a "
+                    "lower phi_bar, or a wider channel")
             x = rel.get_positions()
         if self.kn > self.prep_kn and not compressed:
             # the soft pour leaves overlaps ~ load/prep_kn; relax them at the run's stiffness
@@ -230,6 +336,9 @@ class Channel:
                 stiff_sim.set_velocities(np.zeros_like(x))
                 stiff_sim.set_angular_velocities(np.zeros_like(x))
             x = stiff_sim.get_positions()
+        done = say(f"released: {len(d)} spheres, phi_bar = {vs / (self.W * self.H * self.B):.4f}"
+                   f" ({'squeezed into H' if compressed else 'bed top'} "
+                   f"{min(top, self.H):.4g}); relaxation {say.elapsed - settled:.1f} s")
         self._release(x, d, {
             "n": int(len(d)),
             "phi_bar_achieved": vs / (self.W * self.H * self.B),
@@ -237,6 +346,8 @@ class Channel:
             "compressed": bool(compressed),
             "settle_time": float(sim.time),
             "settle_ke": float(ke),
+            "pour_seconds": settled,
+            "seconds": done,
         })
 
     def _release(self, x: np.ndarray, d: np.ndarray, prep_info: dict[str, Any]) -> None:
@@ -269,6 +380,29 @@ class Channel:
                 "(step 0, at rest)")
         self._release(np.array(core.positions()), np.array(core.diameters()),
                       {**other.prep_info, "prepared_with_kn": other.kn})
+
+    def branch_from(self, checkpoint: str | os.PathLike[str]) -> None:
+        """Start from the state saved in another channel's checkpoint (positions, velocities
+        and spins, e.g. a steady flow at another k_n) with this channel's law, dt and
+        sampling; time and statistics start at zero, tangential springs at zero. The
+        geometry must be the checkpoint's."""
+        if self.sim is not None:
+            raise ConfigurationError("branch_from needs a channel not yet prepared")
+        src = Simulation.from_checkpoint(checkpoint, threads=1)
+        box = src.parameters()["box"]
+        for i, name in enumerate(("W", "H", "B")):
+            if abs(float(box["length"][i]) - getattr(self, name)) > 1e-9:
+                raise ParameterError(
+                    f"invalid {name} = {getattr(self, name)!r}: allowed "
+                    f"{float(box['length'][i])!r} (the checkpoint's)")
+        prep = f"{os.fspath(checkpoint)}.prep.json"
+        info = json.loads(open(prep).read()) if os.path.exists(prep) else {}
+        self._release(src.get_positions(), np.array(src.core.diameters()),
+                      {**info, "branched_from": os.fspath(checkpoint),
+                       "branched_at_time": float(src.time)})
+        sim = self._simulation()
+        sim.set_velocities(src.get_velocities())
+        sim.set_angular_velocities(src.get_angular_velocities())
 
     def _add_samplers(self, core: _core.Sim) -> None:
         """The kernel's samplers of this scene (docs/columns.md): bins and series (none with

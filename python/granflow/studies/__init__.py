@@ -3,5 +3,11 @@
 - :mod:`granflow.studies.stability` — runs at the edges of the parameter space
   (``python -m granflow.studies.stability``);
 - :mod:`granflow.studies.timestep` — work-precision (timestep) studies
-  (``python -m granflow.studies.timestep``).
+  (``python -m granflow.studies.timestep``);
+- :mod:`granflow.studies.reproduce_000` — the channel across widths, volume fractions and
+  stiffnesses, and its report (``python -m granflow.studies.reproduce_000``);
+- :mod:`granflow.studies.reproduce_002` — the cell's Table 1 and figures 3-8, and its report
+  (``python -m granflow.studies.reproduce_002``).
+
+Both reproductions run as resumable campaigns (:mod:`granflow.studies._campaign`).
 """

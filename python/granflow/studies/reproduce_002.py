@@ -20,12 +20,11 @@ mu_s, prints each Table 1 row beside the paper's and draws figures 3-8.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -283,6 +282,8 @@ def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
     checkpoint. Returns the number of points dropped."""
     from granflow import _core
 
+    from ._campaign import write_rows
+
     outp = Path(out)
     pts = pl.read_parquet(outp / "points.parquet")
     keep, se_rows, dropped = [], [], 0
@@ -303,86 +304,41 @@ def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
             continue
         se_rows += row.pop("se_rows")
         keep.append({**old, **row})
-    _write(outp / "points.parquet", keep)
-    _write(outp / "se_vs_time.parquet", se_rows)
+    write_rows(outp / "points.parquet", keep)
+    write_rows(outp / "se_vs_time.parquet", se_rows)
     return dropped
 
 
 # --------------------------------------------------------------------------------------------
 # the campaign
 # --------------------------------------------------------------------------------------------
-def _done_keys(out: Path) -> set[str]:
-    f = out / "points.parquet"
-    if not f.exists():
-        return set()
-    d = pl.read_parquet(f)
-    return {Point(r["mu_s"], r["tau_ratio"], r["seed"], r["N"], r["p_ext"]).key
-            for r in d.iter_rows(named=True)}
-
-
-def _write(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False) -> None:
-    from granflow import io
-
-    if not rows:
-        return
-    new = pl.from_dicts(list(rows), infer_schema_length=None)
-    if append and f.exists():
-        new = pl.concat([pl.read_parquet(f), new], how="diagonal_relaxed")
-    io.write_parquet(new.to_arrow(), f)
-
-
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None, log: Any = print) -> pl.DataFrame:
     """Run the points of ``plan`` not yet in ``out/points.parquet``; each finished point is
     appended there as it completes (local process pool by default, or a Dask scheduler)."""
-    from granflow.study import map_tasks
+    from ._campaign import fmt, run_points
 
-    outp = Path(out)
-    outp.mkdir(parents=True, exist_ok=True)
-    done = _done_keys(outp)
-    todo = [p for p in plan.points if p.key not in done]
-    log(f"{plan.name}: {len(plan.points)} points, {len(done)} done, {len(todo)} to run")
-    work = str(outp / "work")
-    args = [(p, plan, work) for p in todo]
-    for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler):
-        se_rows = row.pop("se_rows")
-        _write(outp / "points.parquet", [row], append=True)
-        _write(outp / "se_vs_time.parquet", se_rows, append=True)
-        log(f"  {Point(row['mu_s'], row['tau_ratio'], row['seed'], row['N'], row['p_ext']).key}: "
-            f"{row.get('state')}, I = {row.get('I', math.nan):.4g}, phi = "
-            f"{row.get('phi', math.nan):.4f}, {row['shear_steps']} steps, "
-            f"{row['wall_seconds']:.0f} s")
-    return pl.read_parquet(outp / "points.parquet")
+    def describe(row: dict[str, Any]) -> str:
+        return (f"{row.get('state')}, I = {fmt(row, 'I')}, phi = {fmt(row, 'phi', '.4f')}, "
+                f"{row['shear_steps']} steps, {row['wall_seconds']:.0f} s")
+
+    return run_points(plan.points, run_point, (plan,), out, tables={"se_rows": "se_vs_time"},
+                      workers=workers, scheduler=scheduler, describe=describe, log=log,
+                      name=plan.name)
 
 
 def main(argv: Iterable[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(prog="python -m granflow.studies.reproduce_002",
-                                 description=__doc__.splitlines()[0])
-    mode = ap.add_mutually_exclusive_group()
-    mode.add_argument("--quick", action="store_true", help="minutes-long subset (default)")
-    mode.add_argument("--full", action="store_true", help="the Table 1 campaign")
-    mode.add_argument("--paper", action="store_true",
-                      help="002's own scale (a cluster's work: see the report's recipe)")
-    ap.add_argument("--out", default=None, help="dataset directory (default results/"
-                    "reproduce_002_<mode>; the committed full campaign: docs/data/reproduce_002)")
-    ap.add_argument("--report", default=None, help="report file (default OUT/report.md)")
-    ap.add_argument("--workers", type=int, default=None)
-    ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
-    ap.add_argument("--only-report", action="store_true", help="no runs, the report only")
-    ap.add_argument("--reanalyse", action="store_true",
-                    help="first recompute the finished points from the series kept in OUT/work")
-    a = ap.parse_args(list(argv) if argv is not None else None)
-    plan = full_plan() if a.full else paper_plan() if a.paper else quick_plan()
-    out = Path(a.out or f"results/reproduce_002_{plan.name}")
-    if a.reanalyse:
-        print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
-    if not a.only_report:
-        run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler)
     from granflow.studies.reproduce_002_report import write_report
 
-    path = write_report(out, Path(a.report) if a.report else out / "report.md", plan,
-                        paper_plan().points)
-    print(f"report: {path}")
+    from ._campaign import cli
+
+    cli(argv, module="granflow.studies.reproduce_002", description=(__doc__ or "").splitlines()[0],
+        plans={"quick": (quick_plan, "minutes-long subset (default)"),
+               "full": (full_plan, "the Table 1 campaign"),
+               "paper": (paper_plan, "002's own scale (a cluster's work: the report's "
+                                     "recipe)")},
+        reanalyse=reanalyse, run_campaign=run_campaign,
+        write_report=lambda out, path, plan: write_report(out, path, plan, paper_plan().points))
 
 
 if __name__ == "__main__":

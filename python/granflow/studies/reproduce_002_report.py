@@ -14,6 +14,8 @@ import polars as pl
 
 from granflow.analysis import rheology as rh
 
+from ._campaign import dask_recipe, md_table, pm
+
 #: figures: (file, title, [(column, I power, axis label)]); every panel against I (or I^2)
 FIGURES: tuple[tuple[str, str, tuple[tuple[str, int, str], ...]], ...] = (
     ("fig3_mu1.png", "fig. 3: mu1 = tau/p against I, (4.2)", (("mu1", 1, "mu1"),)),
@@ -135,29 +137,6 @@ def table_rows(fits: Mapping[float, Mapping[str, rh.FitResult]]) -> pl.DataFrame
     return pl.DataFrame(rows)
 
 
-def _md_table(df: pl.DataFrame, fmt: Mapping[str, str] | None = None) -> str:
-    fmt = fmt or {}
-    head = "| " + " | ".join(df.columns) + " |"
-    sep = "|" + "---|" * len(df.columns)
-    body = []
-    for r in df.iter_rows(named=True):
-        cells = []
-        for c in df.columns:
-            v = r[c]
-            if isinstance(v, float):
-                cells.append("-" if not math.isfinite(v) else format(v, fmt.get(c, ".4g")))
-            else:
-                cells.append(str(v))
-        body.append("| " + " | ".join(cells) + " |")
-    return "\n".join([head, sep, *body])
-
-
-def _pm(v: float, e: float, digits: int = 3) -> str:
-    if not math.isfinite(v):
-        return "-"
-    return f"{v:.{digits}f} ± {e:.{digits}f}" if math.isfinite(e) else f"{v:.{digits}f}"
-
-
 def _verdicts(rows: pl.DataFrame) -> str:
     """One line per parameter family: how many of the mu_s agree, differ, are undetermined."""
     out = []
@@ -182,7 +161,7 @@ def table1_markdown(rows: pl.DataFrame) -> str:
             f"{r['paper']:.3f}" + (" (interp.)" if r["paper_interpolated"]
                                    and r["parameter"].startswith("A") else ""))
         z = "-" if not math.isfinite(r["z"]) else f"{r['z']:.1f}"
-        out.append(f"| {r['mu_s']:g} | {r['parameter']} | {_pm(r['fit'], r['fit_err'])} | "
+        out.append(f"| {r['mu_s']:g} | {r['parameter']} | {pm(r['fit'], r['fit_err'])} | "
                    f"{paper} | {z} | {r['verdict']} |")
     return "\n".join(out)
 
@@ -349,7 +328,7 @@ def _unmet(points: pl.DataFrame, plan: Any) -> list[str]:
         (pl.col("mu1_se") / pl.col("mu1")).alias("SE(mu1)/mu1"))
     return [f"{short.height} flowing points stopped at the step cap short of the SE targets "
             "(they enter the fits with their larger SEs):", "",
-            _md_table(tab, {"p_ext": ".0e", "SE(I)/I": ".3f", "SE(phi)/phi": ".4f",
+            md_table(tab, {"p_ext": ".0e", "SE(I)/I": ".3f", "SE(phi)/phi": ".4f",
                             "SE(mu1)/mu1": ".4f"}), ""]
 
 
@@ -408,7 +387,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   "Where 002 gives all of a law's constants (mu_s = 0 and 0.3, §4), the mean "
                   "distance of our points from its curve at our own I (inverse-variance "
                   "weighted, the SE of I propagated through the curve's slope):", "",
-                  _md_table(off, {**{c: ".4f" for c in off.columns if c != "mu_s"},
+                  md_table(off, {**{c: ".4f" for c in off.columns if c != "mu_s"},
                                   "p_ext": ".0e"}), "",
                   discussion(off), ""]
     lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
@@ -432,14 +411,14 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              / (pl.col("phi_se") ** 2 + pl.col("phi_se_small") ** 2).sqrt())
             .alias("dphi / error"))
         lines += ["## Size effect (N = 10,000 against N = 2000)", "",
-                  _md_table(size, {"dI / error": ".1f", "dphi / error": ".1f"}), ""]
+                  md_table(size, {"dI / error": ".1f", "dphi / error": ".1f"}), ""]
     gone = points.filter(pl.col("state").is_in(["runaway", "failed"]))
     if gone.height:
         lines += ["## Ratios without a steady state", "",
                   "Above these ratios the cell dilates until the kernel's guard (20-fold "
                   "dilation from its densest state) stops it: phi when tau_ext was switched on "
                   "and at the last sample before the stop, after T_end contact times of shear.",
-                  "", _md_table(gone.select("mu_s", "N", "tau_ratio", "seed", "phi_start",
+                  "", md_table(gone.select("mu_s", "N", "tau_ratio", "seed", "phi_start",
                                             "phi_end", "t_end", "state"),
                                 {"phi_start": ".3f", "phi_end": ".3f", "t_end": ".0f"}), ""]
     if se.height:
@@ -452,12 +431,12 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   "times). A point's SE is trusted when its steady part spans "
                   f"a shear strain of {plan.min_strain:g} and its blocking converged; shorter "
                   "stretches are for "
-                  "this table only.", "", _md_table(se_shrink(se), {}), ""]
+                  "this table only.", "", md_table(se_shrink(se), {}), ""]
     est = paper_scale_estimate(points, rate, paper)
     lines += ["## Cost", "",
               f"Measured throughput {rate:.3g} particle-steps per core-second (one thread a "
               "point, two points at a time on this 2-core machine; compaction not counted).",
-              "", _md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f"}), "",
+              "", md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f"}), "",
               f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
               "## The paper-scale campaign (recipe)", "",
               "002 runs N = 1e4, p_ext in {1e-4, 1e-5, 1e-6}, 14 mu_s, tau/p 0-1.2 and 3 "
@@ -468,16 +447,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
               "sqrt(1e-4/p) for the slower strain rate at lower pressure) at the measured "
               f"throughput it needs about {est['core-hours']:,.0f} core-hours: "
               f"{est['core-hours'] / 64:,.0f} hours on 64 cores.", "",
-              "Run it with Dask (each point one task, one thread; resumable as here):", "",
-              "```bash",
-              "# local pool (default), or any Dask scheduler:",
-              "python -m granflow.studies.reproduce_002 --paper --out results/paper_scale \\",
-              "    --scheduler tcp://scheduler:8786",
-              "# on a batch system, a dask-jobqueue cluster gives that address:",
-              "python -c 'from dask_jobqueue import SLURMCluster; c = SLURMCluster(cores=32, "
-              "processes=32, memory=\"64GB\", walltime=\"12:00:00\"); c.scale(jobs=4); "
-              "print(c.scheduler_address); input()'",
-              "```", ""]
+              *dask_recipe("granflow.studies.reproduce_002", "results/paper_scale", "12:00:00")]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path

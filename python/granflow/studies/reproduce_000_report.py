@@ -1,0 +1,539 @@
+"""The report of the 000 campaign (:mod:`granflow.studies.reproduce_000`): the fig. 5 numbers
+against W and phi_bar beside the paper's statements, figures 4-10, the stiffness test per
+zone, error against run time, the cost of each piece and the paper-scale recipe."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import polars as pl
+
+from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, scaled_profile_31
+
+from ._campaign import dask_recipe, md_table, pm
+
+#: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
+RATIO_PAPER = (1.37, 1.40)
+#: 000 §3.2: phi in the plug "~0.63"
+PHI_PLUG_PAPER = 0.63
+#: a difference is significant beyond this many combined SEs; consistent within AGREE
+SIGNIFICANT, AGREE = 3.0, 2.0
+MARKERS = {0.59: "D", 0.6: "v", 0.61: "^", 0.62: "o"}
+
+
+def _steady(points: pl.DataFrame, kn: float | None = 1e5) -> pl.DataFrame:
+    d = points.filter(pl.col("state").is_in(["steady", "fluctuating"]))
+    if kn is not None:
+        d = d.filter((pl.col("kn") / kn - 1).abs() < 1e-9)
+    return d.sort(["W", "phi_bar"])
+
+
+def _with_scaled(d: pl.DataFrame) -> pl.DataFrame:
+    """u_slip/sqrt(W), u_max/sqrt(W), delta_095/W and sigma_xx/W with their SEs."""
+    out = d
+    for col, scale in (("u_slip", pl.col("W").sqrt()), ("u_max", pl.col("W").sqrt()),
+                       ("delta_095", pl.col("W")), ("sigma_xx_mean", pl.col("W"))):
+        out = out.with_columns((pl.col(col) / scale).alias(f"{col}_scaled"),
+                               (pl.col(f"{col}_se") / scale).alias(f"{col}_scaled_se"))
+    return out
+
+
+def fig5_table(steady: pl.DataFrame) -> pl.DataFrame:
+    """One row per steady point: the section 3.1 numbers, each ``value ± SE``."""
+    d = _with_scaled(steady)
+    cols = (("u_slip", 2), ("u_max", 2), ("u_max_over_u_slip", 3), ("delta_095", 2),
+            ("u_slip_scaled", 3), ("u_max_scaled", 3), ("delta_095_scaled", 3),
+            ("mean_velocity_ratio", 4), ("wall_friction", 3))
+    names = {"u_max_over_u_slip": "u_max/u_slip", "u_slip_scaled": "u_slip/√W",
+             "u_max_scaled": "u_max/√W", "delta_095_scaled": "δ0.95/W", "delta_095": "δ0.95",
+             "mean_velocity_ratio": "ū / (3.2)", "wall_friction": "μ_wall"}
+    rows = []
+    for r in d.iter_rows(named=True):
+        row: dict[str, Any] = {"W": r["W"], "φ̄": r["phi_bar"]}
+        for c, dig in cols:
+            row[names.get(c, c)] = pm(r[c], r[f"{c}_se"], dig)
+        rows.append(row)
+    return pl.DataFrame(rows)
+
+
+def _wmean(v: np.ndarray, e: np.ndarray) -> tuple[float, float]:
+    """Inverse-variance mean and its SE."""
+    ok = np.isfinite(v) & np.isfinite(e) & (e > 0)
+    if not ok.any():
+        return math.nan, math.nan
+    w = 1 / e[ok] ** 2
+    return float(np.sum(w * v[ok]) / np.sum(w)), float(1 / math.sqrt(np.sum(w)))
+
+
+def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
+    """u_max/u_slip per W (inverse-variance mean over phi_bar) and its distance from 000's
+    range 1.37-1.40 in SEs."""
+    rows = []
+    for (w,), g in steady.group_by(["W"], maintain_order=True):
+        m, e = _wmean(g["u_max_over_u_slip"].to_numpy(), g["u_max_over_u_slip_se"].to_numpy())
+        gap = max(RATIO_PAPER[0] - m, m - RATIO_PAPER[1], 0.0)
+        rows.append({"W": w, "phi_bar": ", ".join(f"{p:g}" for p in g["phi_bar"]),
+                     "u_max/u_slip": pm(m, e, 4), "below 1.37 by": gap,
+                     "in SEs": gap / e if e > 0 else math.nan})
+    return pl.DataFrame(rows)
+
+
+def collapse(steady: pl.DataFrame) -> pl.DataFrame:
+    """Per phi_bar: u_slip/sqrt(W), u_max/sqrt(W) and delta_095/W at the two widest W with a
+    steady flow, their relative difference and its distance from zero in SEs."""
+    d = _with_scaled(steady)
+    rows = []
+    for (phi,), g in d.group_by(["phi_bar"], maintain_order=True):
+        g = g.sort("W")
+        if g.height < 2:
+            continue
+        a, b = g.row(-2, named=True), g.row(-1, named=True)
+        for col, name in (("u_slip_scaled", "u_slip/√W"), ("u_max_scaled", "u_max/√W"),
+                          ("delta_095_scaled", "δ0.95/W")):
+            diff = b[col] - a[col]
+            se = math.hypot(a[f"{col}_se"], b[f"{col}_se"])
+            rows.append({"φ̄": phi, "quantity": name, f"W = {a['W']:g}": a[col],
+                         f"W = {b['W']:g}": b[col], "widths": f"{a['W']:g} → {b['W']:g}",
+                         "relative change": diff / a[col], "in SEs": diff / se})
+    if not rows:
+        return pl.DataFrame()
+    return pl.DataFrame(rows).select("φ̄", "quantity", "widths", "relative change", "in SEs")
+
+
+def zone_table(steady: pl.DataFrame) -> pl.DataFrame:
+    """Zones (§3.2), plug phi, conduction length and Omega_z/omega_z per steady point."""
+    rows = []
+    for r in steady.iter_rows(named=True):
+        rows.append({"W": r["W"], "φ̄": r["phi_bar"], "xi_plug": r["xi_plug"],
+                     "xi_ad": pm(r["xi_ad"], r["xi_ad_se"], 1),
+                     "φ plug": pm(r["phi_plug"], r["phi_plug_se"], 4),
+                     "l_c": ("at bound" if r["l_c_at_bound"] else pm(r["l_c"], r["l_c_se"], 1)),
+                     "Ω/ω (shearing)": pm(r["omega_ratio_shearing"],
+                                          r["omega_ratio_shearing_se"], 3),
+                     "σxx/W": pm(r["sigma_xx_mean"] / r["W"], r["sigma_xx_mean_se"] / r["W"],
+                                 3)})
+    return pl.DataFrame(rows)
+
+
+#: the kinetic coefficients of fig. 13 (B8-B10), column and label
+KINETIC = (("p_phi", "p_φ = σxx/T (B8)"), ("mu_phi", "μ_φ = σxy/(|du/dx| T^1/2) (B9)"),
+           ("D_phi", "D_φ = Γ/T^3/2 (B10)"))
+#: 000 §3.3: the fig. 13 divergence fits give phi_ad = 0.59 +- 0.002
+PHI_AD_PAPER = (0.59, 0.002)
+
+
+def phi_ad_fits(profiles: pl.DataFrame) -> pl.DataFrame:
+    """Fit A/(phi_ad - phi) (granflow.analysis.channel.fit_phi_ad) to each kinetic coefficient
+    over the loose-zone bins of every steady k_n = 1e5 point, pooled (fig. 13)."""
+    loose = profiles.filter(pl.col("zone") == "loose", pl.col("parent") == "")
+    rows = []
+    for col, name in KINETIC:
+        f = fit_phi_ad(loose["phi"].to_numpy(), loose[col].to_numpy(),
+                       loose[f"{col}_se"].to_numpy())
+        rows.append({"coefficient": name, "bins": f["n"], "φ_ad": pm(f["phi_ad"],
+                     f["phi_ad_se"], 4), "χ²/dof": f["chi2_per_dof"],
+                     "from 0.59 (SEs)": (f["phi_ad"] - PHI_AD_PAPER[0])
+                     / math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1])})
+    return pl.DataFrame(rows)
+
+
+def plot_fig13(profiles: pl.DataFrame, path: Path) -> Path:
+    """The kinetic coefficients against 0.64 - phi, by zone, all steady k_n = 1e5 points."""
+    from matplotlib.figure import Figure
+
+    d = profiles.filter(pl.col("parent") == "")
+    fig = Figure(figsize=(12, 3.8))
+    colours = {"dense": "k", "loose": "tab:brown", "wall": "r", "plug": "0.6"}
+    for k, (col, name) in enumerate(KINETIC):
+        ax = fig.add_subplot(1, 3, k + 1)
+        for zone, c in colours.items():
+            z = d.filter(pl.col("zone") == zone, pl.col(col) > 0)
+            ax.plot(PHI_RCP - z["phi"], z[col], "o", ms=3, color=c, label=f"{zone} zone")
+        ax.axvline(PHI_RCP - PHI_AD, color="b", ls=":", lw=0.8, label=f"φ = φ_ad = {PHI_AD}")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("0.64 - φ")
+        ax.set_ylabel(name)
+        ax.set_title(f"fig. 13: {col}")
+        ax.legend(fontsize=6)
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------------------------
+# stiffness (fig. 10)
+# --------------------------------------------------------------------------------------------
+STIFF_QUANTITIES = (("phi", "φ"), ("u", "u"), ("gamma_dot", "du/dx"), ("T", "T"))
+
+
+def stiffness_table(profiles: pl.DataFrame, points: pl.DataFrame) -> pl.DataFrame:
+    """For each branch against its k_n = 1e5 parent, per zone of the parent and quantity: the
+    mean relative difference over the zone's bins, the median and largest |z| (difference /
+    combined SE per bin) and the fraction of bins with |z| > SIGNIFICANT."""
+    rows = []
+    for b in points.filter(pl.col("parent").str.len_chars() > 0).iter_rows(named=True):
+        key = {k: b[k] for k in ("W", "phi_bar", "seed", "B", "H")}
+        par = profiles.filter(*(pl.col(k) == v for k, v in key.items()),
+                              pl.col("parent") == "").sort("xi")
+        br = profiles.filter(*(pl.col(k) == v for k, v in key.items()),
+                             (pl.col("kn") / b["kn"] - 1).abs() < 1e-9).sort("xi")
+        if par.height == 0 or par.height != br.height:
+            continue
+        for zone in ("plug", "dense", "loose", "wall"):
+            m = (par["zone"] == zone).to_numpy()
+            if not m.any():
+                continue
+            for q, name in STIFF_QUANTITIES:
+                a, c = par[q].to_numpy()[m], br[q].to_numpy()[m]
+                se = np.hypot(par[f"{q}_se"].to_numpy()[m], br[f"{q}_se"].to_numpy()[m])
+                z = np.abs(c - a) / se
+                rows.append({"k_n": f"{b['kn']:.0e} vs 1e+05", "zone": zone, "bins": int(m.sum()),
+                             "quantity": name,
+                             "mean rel. diff.": float(np.mean((c - a) / np.abs(a))),
+                             "median |z|": float(np.median(z)), "max |z|": float(np.max(z)),
+                             f"bins |z|>{SIGNIFICANT:g}": float(np.mean(z > SIGNIFICANT))})
+    return pl.DataFrame(rows)
+
+
+def stiffness_verdict(tab: pl.DataFrame) -> list[str]:
+    """000 §3.3: phi, u, du/dx, T independent of k_n in the loose (and wall) zone; du/dx and
+    (more) T depend on it in the dense shearing and plug zones. Our reading per zone."""
+    if tab.height == 0:
+        return ["No stiffness branches in this dataset."]
+    out = []
+    col = f"bins |z|>{SIGNIFICANT:g}"
+    for (kn, zone), g in tab.group_by(["k_n", "zone"], maintain_order=True):
+        dep = [r["quantity"] for r in g.iter_rows(named=True) if r[col] > 0.5]
+        out.append(f"- {kn}, {zone} zone: "
+                   + (("depends on k_n: " + ", ".join(dep)) if dep else
+                      "no quantity differs in most of its bins")
+                   + " (a quantity 'depends' when more than half of the zone's bins differ by "
+                   f"more than {SIGNIFICANT:g} SEs).")
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# figures
+# --------------------------------------------------------------------------------------------
+def _save(fig: Any, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with np.errstate(under="ignore"):  # log axes spanning many decades (T: 5 in 000)
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    return path
+
+
+def _lbl(r: dict[str, Any]) -> str:
+    return f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}"
+
+
+def plot_fig4(steady: pl.DataFrame, profiles: pl.DataFrame, path: Path) -> Path:
+    """(a) u against the distance from the wall; (b) the scaled profile against
+    x/delta_0.95 with (3.1)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 4))
+    a, b = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    for r in steady.iter_rows(named=True):
+        p = profiles.filter(*(pl.col(k) == r[k] for k in ("W", "phi_bar", "kn", "seed")))
+        if p.height == 0:
+            continue
+        mk = MARKERS.get(round(r["phi_bar"], 2), "o")
+        a.errorbar(p["xi"], p["u"], yerr=p["u_se"], fmt=mk + "-", ms=3, lw=0.8, label=_lbl(r))
+        s = (p["u"] - r["u_slip"]) / (r["u_max"] - r["u_slip"])
+        b.plot(p["xi"] / r["delta_095"], s, mk, ms=3, label=_lbl(r))
+    x = np.linspace(0, 3, 200)
+    b.plot(x, scaled_profile_31(x, 1.0), "r--", label="000 (3.1): 1 - exp(-3x/δ0.95)")
+    a.set_xlabel("distance from the wall x/d")
+    a.set_ylabel("u (√(gd))")
+    a.set_title("fig. 4(a): velocity")
+    b.set_xlabel("x/δ0.95")
+    b.set_ylabel("(u - u_slip)/(u_max - u_slip)")
+    b.set_xlim(0, 3)
+    b.set_title("fig. 4(b): scaled velocity")
+    a.legend(fontsize=6)
+    b.legend(fontsize=6)
+    return _save(fig, path)
+
+
+def plot_fig5(steady: pl.DataFrame, path: Path) -> Path:
+    """u_slip/sqrt(W), u_max/sqrt(W), u_max/u_slip (with 000's 1.37-1.40) and delta_095/W
+    against phi_bar, a line per W."""
+    from matplotlib.figure import Figure
+
+    d = _with_scaled(steady)
+    fig = Figure(figsize=(12, 3.6))
+    panels = (("u_slip_scaled", "u_slip/√W"), ("u_max_scaled", "u_max/√W"),
+              ("u_max_over_u_slip", "u_max/u_slip"), ("delta_095_scaled", "δ0.95/W"))
+    for k, (col, name) in enumerate(panels):
+        ax = fig.add_subplot(1, 4, k + 1)
+        for (w,), g in d.group_by(["W"], maintain_order=True):
+            ax.errorbar(g["phi_bar"], g[col], yerr=g[f"{col}_se"], fmt="o-", ms=4,
+                        capsize=2, label=f"W = {w:g} (granflow, B = {g['B'][0]:g})")
+        if col == "u_max_over_u_slip":
+            ax.axhspan(*RATIO_PAPER, color="r", alpha=0.2, label="000: 1.37-1.40 (W = 60-150)")
+        ax.set_xlabel("φ̄")
+        ax.set_ylabel(name)
+        ax.set_title(f"fig. 5: {name}")
+        ax.legend(fontsize=6)
+    return _save(fig, path)
+
+
+def plot_fig7(steady: pl.DataFrame, path: Path) -> Path:
+    """sigma_xx/W and the wall friction coefficient against phi_bar, a line per W."""
+    from matplotlib.figure import Figure
+
+    d = _with_scaled(steady)
+    fig = Figure(figsize=(9, 3.6))
+    for k, (col, name) in enumerate((("sigma_xx_mean_scaled", "σxx/W (ρ g)"),
+                                     ("wall_friction", "μ_wall"))):
+        ax = fig.add_subplot(1, 2, k + 1)
+        for (w,), g in d.group_by(["W"], maintain_order=True):
+            ax.errorbar(g["phi_bar"], g[col], yerr=g[f"{col}_se"], fmt="o-", ms=4, capsize=2,
+                        label=f"W = {w:g}")
+        ax.set_xlabel("φ̄")
+        ax.set_ylabel(name)
+        ax.set_title(f"fig. 7: {name}")
+        ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def plot_profiles(rows: pl.DataFrame, profiles: pl.DataFrame, path: Path, title: str,
+                  panels: Sequence[tuple[str, str, bool]], label: Any = _lbl) -> Path:
+    """Half profiles of ``rows`` (one line each, error bars), a panel per (column, axis label,
+    log scale); the zone boundaries of each row as dotted lines (plug: black, phi_ad: blue,
+    wall: red)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3.4 * len(panels), 3.6))
+    axes = [fig.add_subplot(1, len(panels), k + 1) for k in range(len(panels))]
+    for r in rows.iter_rows(named=True):
+        p = profiles.filter(*(pl.col(k) == r[k] for k in ("W", "phi_bar", "kn", "seed")))
+        if p.height == 0:
+            continue
+        for ax, (col, name, log) in zip(axes, panels, strict=True):
+            y, e = p[col].to_numpy(), p[f"{col}_se"].to_numpy()
+            if col == "gamma_dot":
+                y = np.abs(y)
+            yerr: Any = e
+            if log:  # positive values only; a lower bar reaching zero is cut at y/10
+                y = np.where(y > 0, y, np.nan)
+                yerr = np.vstack([np.minimum(e, 0.9 * y), e])
+            with np.errstate(under="ignore"):
+                ax.errorbar(p["xi"], y, yerr=yerr, fmt=".-", ms=3, lw=0.8, label=label(r))
+                if log:
+                    ax.set_yscale("log")
+            ax.set_xlabel("x/d")
+            ax.set_ylabel(name)
+    for ax in axes:
+        lo, hi = ax.get_ylim()
+        for r in rows.iter_rows(named=True):
+            for x, c in ((r.get("xi_plug"), "k"), (r.get("xi_ad"), "b"), (r.get("xi_wall"), "r")):
+                if x is not None and math.isfinite(x):
+                    ax.axvline(x, color=c, ls=":", lw=0.6)
+        ax.set_ylim(lo, hi)
+    axes[0].plot([], [], "k:", label="plug edge")
+    axes[0].plot([], [], "b:", label=f"φ = φ_ad = {PHI_AD}")
+    axes[0].plot([], [], "r:", label="wall zone")
+    axes[0].legend(fontsize=6)
+    fig.suptitle(title, fontsize=9)
+    return _save(fig, path)
+
+
+def plot_campaign_se(se: pl.DataFrame, path: Path) -> Path:
+    """SE of u_slip and u_max against the averaging time, a line per point, with T^-1/2."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 3.6))
+    for k, col in enumerate(("u_slip", "u_max")):
+        ax = fig.add_subplot(1, 2, k + 1)
+        for _, g in se.group_by(["W", "phi_bar", "kn", "seed"], maintain_order=True):
+            g = g.sort("T_avg")
+            ax.plot(g["T_avg"], g[f"{col}_se"] / g[col], "o-", ms=3, lw=0.8,
+                    label=f"W = {g['W'][0]:g}, φ̄ = {g['phi_bar'][0]:g}, "
+                          f"k_n = {g['kn'][0]:.0e}")
+        t = np.array([se["T_avg"].min(), se["T_avg"].max()], dtype=float)
+        full = se.filter(pl.col("fraction") == 1.0)
+        c = float(np.median((full[f"{col}_se"] / full[col]).to_numpy()
+                            * np.sqrt(full["T_avg"].to_numpy())))
+        ax.plot(t, c / np.sqrt(t), "k--", label="median SE ~ T^-1/2")
+        ax.axhline(0.01, color="r", lw=0.6, label="1 % target")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("steady averaging time T (√(d/g))")
+        ax.set_ylabel(f"SE({col}) / {col}")
+        ax.legend(fontsize=5)
+    return _save(fig, path)
+
+
+# --------------------------------------------------------------------------------------------
+# cost
+# --------------------------------------------------------------------------------------------
+def cost(points: pl.DataFrame) -> tuple[pl.DataFrame, float]:
+    """Per W: points, preparation and run wall time, core-hours (one core a point); and the
+    throughput in particle-steps per core-second (runs only)."""
+    d = points.with_columns((pl.col("n") * pl.col("steps")).alias("particle_steps"))
+    per = d.group_by(["W", "kn"], maintain_order=True).agg(
+        pl.len().alias("points"), pl.col("n").max().alias("particles"),
+        pl.col("prep_seconds").max().alias("longest preparation (s)"),
+        (pl.col("wall_seconds").sum() / 3600).alias("core-hours"),
+        pl.col("wall_seconds").max().alias("longest point (s)")).sort(["kn", "W"])
+    run = (d["wall_seconds"] - d["prep_seconds"].fill_nan(0.0)).sum()
+    rate = float(d["particle_steps"].sum()) / float(run)
+    return per, rate
+
+
+def paper_scale_estimate(plan: Any, rate: float) -> dict[str, float]:
+    """Core-hours of ``plan`` (reproduce_000.paper_plan): every point to its t_max at its dt,
+    its particle count from W H B phi_bar / <pi d^3/6> of 000's mix, at ``rate``."""
+    from granflow.sizes import CHANNEL_MIX
+
+    d, f = np.array(CHANNEL_MIX.params[0::2]), np.array(CHANNEL_MIX.params[1::2])
+    v = float(np.sum(f * np.pi * d**3 / 6))
+    total = sum(p.W * p.H * p.B * p.phi_bar / v * plan.t_max / p.dt for p in plan.points)
+    return {"runs": len(plan.points), "particle-steps": total,
+            "core-hours": total / rate / 3600}
+
+
+# --------------------------------------------------------------------------------------------
+# the report
+# --------------------------------------------------------------------------------------------
+def _read(out: Path, stem: str) -> pl.DataFrame:
+    f = out / f"{stem}.parquet"
+    return pl.read_parquet(f) if f.exists() else pl.DataFrame()
+
+
+def _run_table(points: pl.DataFrame) -> pl.DataFrame:
+    return points.sort(["kn", "W", "phi_bar"]).select(
+        "W", "phi_bar", pl.col("kn").map_elements(lambda k: f"{k:.0e}", return_dtype=pl.String),
+        "n", "state", "converged", "t_start", "T_avg", "t_run",
+        pl.col("prep_seconds").alias("prep (s)"), pl.col("wall_seconds").alias("wall (s)"))
+
+
+def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
+    """Write the markdown report for the dataset in ``out`` (campaign ``plan``) to ``path``
+    (figures beside it, in ``<path stem>_figures/``), with the cost of the ``paper`` plan."""
+    points = _read(out, "points")
+    profiles, se = _read(out, "profiles"), _read(out, "se_vs_time")
+    steady = _steady(points)
+    figdir = path.parent / f"{path.stem}_figures"
+    rel = path.parent
+    figs: list[Path] = []
+    lines = [f"# Reproducing 000: the channel across W and φ̄ ({plan.name} campaign)", "",
+             "Generated by `python -m granflow.studies.reproduce_000 "
+             f"--{plan.name} --out {out} --report {path}`; the datasets read back with "
+             f"`pl.read_parquet('{out}/points.parquet')` (one row per run; also "
+             "`profiles.parquet`, half profiles with SEs and zone labels, `zones.parquet`, "
+             "zone means, and `se_vs_time.parquet`).", "",
+             "## What was run", "",
+             f"{points.height} channel runs (granflow.scenes.channel.Channel: 000's material "
+             "and contact law, e_n = 0.82, μ_p = 0.5, k_t = 2/7 k_n, the 0.9/1.0/1.1 mix; "
+             "fill and release), at reduced depth and height (B, H below; 000: B = 40, "
+             "H = 60 + ΔH) and k_n = 1e5 with dt = 1.2e-4 √(1e6/k_n) (the stiffness study "
+             "below is the justification). Each runs in stints of "
+             f"{plan.stint:g} √(d/g) until it is steady (the last half of |v_cm| steady or "
+             "fluctuating by granflow.analysis.channel_profiles.flow_state), its steady part "
+             f"(MSER start) spans at least {plan.min_average:g} and the jackknife SEs of "
+             f"u_slip and u_max are within {plan.se_target:.0%}, or it arrests for two stints, "
+             f"or reaches t = {plan.t_max:g}. States: "
+             + ", ".join(f"{k} {v}" for k, v in sorted(
+                 points["state"].value_counts().iter_rows())) + ".", "",
+             md_table(_run_table(points), {"t_start": ".0f", "T_avg": ".0f", "t_run": ".0f",
+                                           "prep (s)": ".1f", "wall (s)": ".0f"}), ""]
+    if steady.height:
+        figs += [plot_fig4(steady, profiles, figdir / "fig4_velocity.png"),
+                 plot_fig5(steady, figdir / "fig5_scaling.png"),
+                 plot_fig7(steady, figdir / "fig7_stress_wall_friction.png")]
+        ratio = ratio_by_width(steady)
+        col = collapse(steady)
+        lines += ["## Fig. 5: velocity scaling against W and φ̄", "",
+                  md_table(fig5_table(steady)), "",
+                  "u_max/u_slip per width (000: 1.37-1.40 for W = 60-150 and every φ̄):", "",
+                  md_table(ratio, {"below 1.37 by": ".3f", "in SEs": ".1f"}), ""]
+        if col.height:
+            lines += ["Collapse (000: u/√W and δ0.95/W independent of W for W ≥ 100, not "
+                      "quite at 60): the change between the two widest steady widths per φ̄",
+                      "", md_table(col, {"relative change": "+.3f", "in SEs": "+.1f"}), ""]
+        lines += ["## Zones, plug and conduction length (§3.2, figs 8-9, B13)", "",
+                  f"000: φ in the plug ~{PHI_PLUG_PAPER}, Ω_z/ω_z = 1/2 in the shearing zones, "
+                  f"l_c ≈ {L_C_PAPER} d, σxx ∝ W (fig. 7a), μ_wall independent of W and "
+                  "falling with φ̄ (fig. 7b). xi_plug, xi_ad: the plug edge and the "
+                  "φ = φ_ad crossing (distance from the wall).", "",
+                  md_table(zone_table(steady)), "",
+                  "φ_ad from fig. 13 (000: the loose-zone coefficients diverge as "
+                  "(φ_ad - φ)^-1 with φ_ad = 0.59 ± 0.002): a fit to the loose-zone bins of "
+                  "every steady point, pooled:", "",
+                  md_table(phi_ad_fits(profiles), {"χ²/dof": ".2f",
+                                                   "from 0.59 (SEs)": "+.1f"}), ""]
+        figs.append(plot_fig13(profiles, figdir / "fig13_kinetic.png"))
+        wide = steady.filter(pl.col("W") == steady["W"].max())
+        figs += [
+            plot_profiles(wide, profiles, figdir / "fig6_stress.png",
+                          f"fig. 6: stresses, W = {wide['W'][0]:g}",
+                          (("sigma_xx", "σxx", False), ("sigma_xy", "σxy", False))),
+            plot_profiles(wide, profiles, figdir / "fig8_profiles.png",
+                          f"fig. 8: φ, |du/dx|, T, production, dissipation, W = {wide['W'][0]:g}",
+                          (("phi", "φ", False), ("gamma_dot", "|du/dx|", True),
+                           ("T", "T", True), ("production", "σxy du/dx", True),
+                           ("Gamma", "dissipation Γ", True))),
+            plot_profiles(wide, profiles, figdir / "fig9_rotation.png",
+                          f"fig. 9: Ω_z/ω_z and (du/dx)/√T, W = {wide['W'][0]:g}",
+                          (("omega_ratio", "Ω_z/ω_z", False),
+                           ("gamma_over_sqrtT", "|du/dx| d/√T", False)))]
+    branches = points.filter(pl.col("parent").str.len_chars() > 0)
+    if branches.height:
+        tab = stiffness_table(profiles, points)
+        fam = points.filter(pl.col("W") == branches["W"][0],
+                            pl.col("phi_bar") == branches["phi_bar"][0]).sort("kn")
+        figs.append(plot_profiles(
+            fam, profiles, figdir / "fig10_stiffness.png",
+            f"fig. 10: k_n, W = {fam['W'][0]:g}, φ̄ = {fam['phi_bar'][0]:g}",
+            (("phi", "φ", False), ("u", "u", False), ("gamma_dot", "|du/dx|", True),
+             ("T", "T", True)), label=lambda r: f"k_n = {r['kn']:.0e}"))
+        lines += ["## Stiffness (fig. 10)", "",
+                  "000 §3.3: φ, u, du/dx and T are independent of k_n in the wall and loose "
+                  "zones; du/dx, and T more strongly, depend on k_n in the dense shearing and "
+                  "plug zones (T in the plug falls as k_n grows). Here: the k_n = 1e5 run's "
+                  "final state run on at each k_n (module docstring), compared bin by bin in "
+                  "the zones of the k_n = 1e5 run:", "",
+                  md_table(tab, {"mean rel. diff.": "+.3f", "median |z|": ".1f",
+                                 "max |z|": ".1f"}), "", *stiffness_verdict(tab), ""]
+    if se.height:
+        figs.append(plot_campaign_se(se, figdir / "se_vs_time.png"))
+        shrink = se.join(se.filter(pl.col("fraction") == 1.0),
+                         on=["W", "phi_bar", "kn", "seed"], suffix="_all").group_by(
+            "fraction").agg((pl.col("u_slip_se") / pl.col("u_slip_se_all")).median()
+                            .alias("SE(u_slip)/SE(all)"),
+                            (pl.col("u_max_se") / pl.col("u_max_se_all")).median()
+                            .alias("SE(u_max)/SE(all)")).sort("fraction").with_columns(
+            (1 / pl.col("fraction").sqrt()).alias("expected (T^-1/2)"))
+        lines += ["## Error against run time", "",
+                  "The jackknife SEs of u_slip and u_max from the first quarter, half and all "
+                  "of each point's steady part, as a ratio to the SE from all of it (median "
+                  "over points):", "", md_table(shrink, {}), ""]
+    lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
+    if points.height and points["steps"].sum():
+        per, rate = cost(points)
+        est = paper_scale_estimate(paper, rate)
+        lines += ["## Cost", "",
+                  f"Measured throughput {rate:.3g} particle-steps per core-second (one thread "
+                  "a point, two points at a time on this 2-core machine; preparation not "
+                  "counted).", "",
+                  md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f",
+                                 "longest preparation (s)": ".1f", "kn": ".0e"}), "",
+                  f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
+                  "## The paper-scale campaign (recipe)", "",
+                  "000 runs W = 60-150, B = 40, H = 60 + ΔH, φ̄ = 0.59-0.62 at k_n = 1e6 and "
+                  "averages over t = 2000-2600. `--paper` (reproduce_000.paper_plan) is that "
+                  f"campaign, W = 60, 80, 100, 125, 150 x four φ̄ x 3 seeds: {est['runs']:.0f} "
+                  f"runs to t = {paper.t_max:g}, {est['particle-steps']:.3g} particle-steps, "
+                  f"about {est['core-hours']:,.0f} core-hours at the measured throughput "
+                  f"({est['core-hours'] / 64:,.0f} hours on 64 cores; fewer where a run "
+                  "arrests or meets its SE target early).", "",
+                  *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines))
+    return path

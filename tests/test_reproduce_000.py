@@ -1,0 +1,92 @@
+"""The 000 campaign's machinery (granflow.studies.reproduce_000) on its --quick plan: points run
+in stints until steady and converged (or t_max), a branch continues its parent's final state
+at another k_n, finished points are kept and skipped when run again, and the report gives the
+fig. 5 numbers, the stiffness table, the figures and the cost."""
+
+from __future__ import annotations
+
+import math
+
+import polars as pl
+import pytest
+from granflow.studies import reproduce_000 as rp
+from granflow.studies.reproduce_000_report import write_report
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("r000")
+    plan = rp.quick_plan()
+    rp.run_campaign(plan, out, workers=1, log=lambda *_: None)
+    return plan, out
+
+
+def test_points_stop_by_the_stated_criterion(quick):
+    plan, out = quick
+    d = pl.read_parquet(out / "points.parquet")
+    assert sorted(d["key"].to_list() if "key" in d.columns else
+                  [rp.Point(r["W"], r["phi_bar"], r["seed"], r["kn"], r["B"], r["H"],
+                            r["parent"]).key for r in d.iter_rows(named=True)]) == sorted(
+        p.key for p in (*plan.points, *plan.branches))
+    for r in d.iter_rows(named=True):
+        point = rp.Point(r["W"], r["phi_bar"], r["seed"], r["kn"], r["B"], r["H"], r["parent"])
+        t_max, min_average = plan.limits(point)
+        assert r["state"] in ("steady", "fluctuating"), r  # these small channels flow
+        assert r["converged"] or r["t_run"] >= t_max - 1e-6
+        if r["converged"]:
+            assert r["T_avg"] >= min_average
+            for k in ("u_slip", "u_max"):
+                assert r[f"{k}_se"] <= plan.se_target * r[k]
+        assert 1.0 < r["u_max_over_u_slip"] < 2.0 and math.isfinite(r["u_max_over_u_slip_se"])
+        assert r["prep_seconds"] >= 0 and r["wall_seconds"] > r["prep_seconds"]
+    # a denser channel flows slower (000 fig. 5)
+    base = d.filter(pl.col("kn") == 1e5).sort("phi_bar")
+    assert base["u_slip"][0] > base["u_slip"][1]
+
+
+def test_a_branch_starts_from_its_parents_state(quick):
+    plan, out = quick
+    d = pl.read_parquet(out / "points.parquet")
+    br = d.filter(pl.col("parent") != "").row(0, named=True)
+    parent = d.filter(pl.col("parent") == "", pl.col("phi_bar") == br["phi_bar"]).row(
+        0, named=True)
+    assert br["kn"] == 1e6 and br["n"] == parent["n"]
+    # it starts flowing: its steady part begins within a stint, not after a new development
+    assert br["t_start"] < plan.stint
+    prof = pl.read_parquet(out / "profiles.parquet")
+    assert prof.filter(pl.col("parent") != "").height == prof.filter(
+        pl.col("parent") == "", pl.col("phi_bar") == br["phi_bar"]).height
+
+
+def test_a_finished_point_is_not_run_again(quick):
+    plan, out = quick
+    said: list[str] = []
+    rp.run_campaign(plan, out, workers=1, log=said.append)
+    assert f"{len(plan.points)} done, 0 to run" in said[0]
+    assert pl.read_parquet(out / "points.parquet").height == len(plan.points) + len(
+        plan.branches)
+
+
+def test_the_report_has_fig5_stiffness_figures_and_cost(quick):
+    plan, out = quick
+    path = write_report(out, out / "report.md", plan, rp.paper_plan())
+    text = path.read_text()
+    for head in ("## Fig. 5", "## Stiffness (fig. 10)", "## Error against run time",
+                 "## Cost", "core-hours", "--scheduler"):
+        assert head in text
+    assert "| 12 | 0.58 |" in text
+    figs = sorted((out / "report_figures").glob("*.png"))
+    assert len(figs) == 8 and all(f.stat().st_size > 10_000 for f in figs)
+    for f in figs:
+        assert f"report_figures/{f.name}" in text
+
+
+def test_reanalyse_keeps_finished_points(quick):
+    plan, out = quick
+    before = pl.read_parquet(out / "points.parquet")
+    rp.reanalyse(out, plan)
+    after = pl.read_parquet(out / "points.parquet")
+    assert after.height + 0 >= 1
+    kept = after.join(before, on=["W", "phi_bar", "kn"], suffix="_old")
+    # the same tables give the same numbers
+    assert (kept["u_slip"] - kept["u_slip_old"]).abs().max() == 0.0
