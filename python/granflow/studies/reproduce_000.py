@@ -352,15 +352,18 @@ def _describe(row: dict[str, Any]) -> str:
 
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None, log: Any = print) -> pl.DataFrame:
-    """Run the points of ``plan`` not yet in ``out/points.parquet``, then its branches (whose
-    parents are done by then), then its later points; each finished point is appended there
-    as it completes."""
-    from ._campaign import run_points
+    """Run the points of ``plan`` not yet in ``out/points.parquet`` (with the branches whose
+    parents are done, first), then the other branches (their parents are done by then), then
+    its later points; each finished point is appended there as it completes."""
+    from ._campaign import done_keys, run_points
 
     kw: dict[str, Any] = {"tables": ROW_TABLES, "workers": workers, "scheduler": scheduler,
                           "describe": _describe, "log": log}
-    run_points(plan.points, run_point, (plan,), out, name=plan.name, **kw)
-    run_points(plan.branches, run_point, (plan,), out, name=f"{plan.name} branches", **kw)
+    done = done_keys(Path(out), Point)
+    ready = tuple(b for b in plan.branches if b.parent in done)
+    run_points((*ready, *plan.points), run_point, (plan,), out, name=plan.name, **kw)
+    waiting = tuple(b for b in plan.branches if b not in ready)
+    run_points(waiting, run_point, (plan,), out, name=f"{plan.name} branches", **kw)
     return run_points(plan.later, run_point, (plan,), out, name=f"{plan.name} later", **kw)
 
 

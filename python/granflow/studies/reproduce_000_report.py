@@ -82,6 +82,30 @@ def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
     return pl.DataFrame(rows)
 
 
+def ratio_trend(steady: pl.DataFrame) -> pl.DataFrame:
+    """Per phi_bar with two or more widths: u_max/u_slip = r_inf - c/W fitted over the widths
+    (weighted by the SEs; exact through two), r_inf with its SE, and whether it reaches 000's
+    1.37-1.40 within two SEs."""
+    rows = []
+    for (phi,), g in steady.group_by(["phi_bar"], maintain_order=True):
+        if g.height < 2:
+            continue
+        x = 1 / g["W"].to_numpy()
+        y, e = g["u_max_over_u_slip"].to_numpy(), g["u_max_over_u_slip_se"].to_numpy()
+        a = np.vstack([np.ones_like(x), -x]).T / e[:, None]
+        cov = np.linalg.inv(a.T @ a)
+        coef = cov @ (a.T @ (y / e))
+        chi2 = float(np.sum(((y - coef[0] + coef[1] * x) / e) ** 2))
+        dof = g.height - 2
+        se = math.sqrt(cov[0, 0] * (max(1.0, chi2 / dof) if dof > 0 else 1.0))
+        gap = max(RATIO_PAPER[0] - coef[0], coef[0] - RATIO_PAPER[1], 0.0)
+        rows.append({"φ̄": phi, "widths": ", ".join(f"{w:g}" for w in g["W"]),
+                     "r_inf (W → ∞)": pm(float(coef[0]), se, 3),
+                     "c": float(coef[1]),
+                     "reaches 1.37-1.40": "yes" if gap <= 2 * se else "no"})
+    return pl.DataFrame(rows)
+
+
 def collapse(steady: pl.DataFrame) -> pl.DataFrame:
     """Per phi_bar: u_slip/sqrt(W), u_max/sqrt(W) and delta_095/W at the two widest W with a
     steady flow, their relative difference and its distance from zero in SEs."""
@@ -198,20 +222,51 @@ def stiffness_table(profiles: pl.DataFrame, points: pl.DataFrame) -> pl.DataFram
     return pl.DataFrame(rows)
 
 
+def stiffness_zone_means(zones: pl.DataFrame, W: float, phi_bar: float) -> pl.DataFrame:
+    """Zone means (each run's own zones; granflow.analysis.channel.zone_means) of phi, u,
+    |du/dx| and T at every k_n of (W, phi_bar), ``value ± SE``, a row per zone and quantity."""
+    fam = zones.filter(pl.col("W") == W, pl.col("phi_bar") == phi_bar).sort("kn")
+    rows = []
+    for zone in ("plug", "dense", "loose", "wall"):
+        z = fam.filter(pl.col("zone") == zone)
+        if not z.height:
+            continue
+        for q, name in (("phi", "φ"), ("u", "u"), ("abs_dudx", "|du/dx|"), ("T", "T")):
+            row: dict[str, Any] = {"zone": zone, "quantity": name}
+            for r in z.iter_rows(named=True):
+                digits = 4 if q == "phi" else max(2, 3 - int(math.floor(math.log10(
+                    max(abs(r[q]), 1e-12)))))
+                row[f"k_n = {r['kn']:.0e} (bins)"] = f"{pm(r[q], r[f'{q}_se'], digits)} " \
+                    f"({r['n_bins']})"
+            rows.append(row)
+    return pl.DataFrame(rows)
+
+
 def stiffness_verdict(tab: pl.DataFrame) -> list[str]:
-    """000 §3.3: phi, u, du/dx, T independent of k_n in the loose (and wall) zone; du/dx and
-    (more) T depend on it in the dense shearing and plug zones. Our reading per zone."""
+    """000 §3.3 in numbers: per k_n and quantity, the bin-weighted mean relative change in the
+    dense shearing and plug zones against that in the loose and wall zones. The paper's
+    statement holds where du/dx and T change more in the first than in the second and phi
+    and u change little in both."""
     if tab.height == 0:
         return ["No stiffness branches in this dataset."]
     out = []
-    col = f"bins |z|>{SIGNIFICANT:g}"
-    for (kn, zone), g in tab.group_by(["k_n", "zone"], maintain_order=True):
-        dep = [r["quantity"] for r in g.iter_rows(named=True) if r[col] > 0.5]
-        out.append(f"- {kn}, {zone} zone: "
-                   + (("depends on k_n: " + ", ".join(dep)) if dep else
-                      "no quantity differs in most of its bins")
-                   + " (a quantity 'depends' when more than half of the zone's bins differ by "
-                   f"more than {SIGNIFICANT:g} SEs).")
+    for (kn,), g in tab.group_by(["k_n"], maintain_order=True):
+        parts = []
+        for _, name in STIFF_QUANTITIES:
+            q = g.filter(pl.col("quantity") == name)
+
+            def mean(zs: tuple[str, ...], q: pl.DataFrame = q) -> float:
+                z = q.filter(pl.col("zone").is_in(zs))
+                if not z.height:
+                    return math.nan
+                return float((z["mean rel. diff."] * z["bins"]).sum() / z["bins"].sum())
+
+            # (du/dx in the plug is zero within its SE: its relative change is noise)
+            zs = ("dense",) if name == "du/dx" else ("dense", "plug")
+            inner, outer = mean(zs), mean(("loose", "wall"))
+            parts.append(f"{name} {inner:+.1%} ({', '.join(zs)}) against {outer:+.1%} "
+                         "(loose, wall)")
+        out.append(f"- {kn}: " + "; ".join(parts) + ".")
     return out
 
 
@@ -413,127 +468,193 @@ def _run_table(points: pl.DataFrame) -> pl.DataFrame:
         pl.col("prep_seconds").alias("prep (s)"), pl.col("wall_seconds").alias("wall (s)"))
 
 
+Section = tuple[list[str], list[Path]]
+
+
+def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
+    return ["## What was run", "",
+            f"{points.height} channel runs (granflow.scenes.channel.Channel: 000's material "
+            "and contact law, e_n = 0.82, μ_p = 0.5, k_t = 2/7 k_n, the 0.9/1.0/1.1 mix; "
+            "fill and release), at reduced depth and height (B, H below; 000: B = 40, "
+            "H = 60 + ΔH) and k_n = 1e5 with dt = 1.2e-4 √(1e6/k_n) (the stiffness study "
+            "below is the justification). Each runs in stints of "
+            f"{plan.stint:g} √(d/g) until it is steady (the last half of |v_cm| steady or "
+            "fluctuating by granflow.analysis.channel_profiles.flow_state), its steady part "
+            f"(MSER start) spans at least {plan.min_average:g} and the jackknife SEs of "
+            f"u_slip and u_max are within {plan.se_target:.0%}, or it arrests for two stints, "
+            f"or reaches t = {plan.t_max:g}. States: "
+            + ", ".join(f"{k} {v}" for k, v in sorted(
+                points["state"].value_counts().iter_rows())) + ". `prep (s)` is the wall "
+            "time of the fill and release, `wall (s)` all of the point's (both on one core "
+            "shared with one other point).", "",
+            md_table(_run_table(points), {"t_start": ".0f", "T_avg": ".0f", "t_run": ".0f",
+                                          "prep (s)": ".1f", "wall (s)": ".0f"}), ""]
+
+
+def _fig5_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) -> Section:
+    figs = [plot_fig4(steady, profiles, figdir / "fig4_velocity.png"),
+            plot_fig5(steady, figdir / "fig5_scaling.png"),
+            plot_fig7(steady, figdir / "fig7_stress_wall_friction.png")]
+    lines = ["## Fig. 5: velocity scaling against W and φ̄", "",
+             md_table(fig5_table(steady)), "",
+             "u_max/u_slip per width (000: 1.37-1.40 for W = 60-150 and every φ̄):", "",
+             md_table(ratio_by_width(steady), {"below 1.37 by": ".3f", "in SEs": ".1f"}), ""]
+    trend = ratio_trend(steady)
+    if trend.height:
+        lines += ["Does it approach 1.37-1.40 as W grows? u_max/u_slip = r_inf - c/W "
+                  "fitted per φ̄ over the widths with a steady flow (two widths: the line "
+                  "through them; an extrapolation, not a measurement):", "",
+                  md_table(trend, {"c": ".2f"}), ""]
+    col = collapse(steady)
+    if col.height:
+        lines += ["Collapse (000: u/√W and δ0.95/W independent of W for W ≥ 100, not "
+                  "quite at 60): the change between the two widest steady widths per φ̄", "",
+                  md_table(col, {"relative change": "+.3f", "in SEs": "+.1f"}), ""]
+    return lines, figs
+
+
+def _zones_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) -> Section:
+    lines = ["## Zones, plug and conduction length (§3.2, figs 8-9, B13)", "",
+             f"000: φ in the plug ~{PHI_PLUG_PAPER}, Ω_z/ω_z = 1/2 in the shearing zones, "
+             f"l_c ≈ {L_C_PAPER} d, σxx ∝ W (fig. 7a), μ_wall independent of W and "
+             "falling with φ̄ (fig. 7b). xi_plug, xi_ad: the plug edge and the "
+             "φ = φ_ad crossing (distance from the wall).", "",
+             md_table(zone_table(steady)), "",
+             "φ_ad from fig. 13 (000: the loose-zone coefficients diverge as "
+             "(φ_ad - φ)^-1 with φ_ad = 0.59 ± 0.002): a fit to the loose-zone bins of "
+             "every steady point, pooled:", "",
+             md_table(phi_ad_fits(profiles), {"χ²/dof": ".2f", "from 0.59 (SEs)": "+.1f"}),
+             ""]
+    wide = steady.filter(pl.col("W") == steady["W"].max())
+    w = f"W = {wide['W'][0]:g}"
+    figs = [plot_fig13(profiles, figdir / "fig13_kinetic.png"),
+            plot_profiles(wide, profiles, figdir / "fig6_stress.png", f"fig. 6: stresses, {w}",
+                          (("sigma_xx", "σxx", False), ("sigma_xy", "σxy", False))),
+            plot_profiles(wide, profiles, figdir / "fig8_profiles.png",
+                          f"fig. 8: φ, |du/dx|, T, production, dissipation, {w}",
+                          (("phi", "φ", False), ("gamma_dot", "|du/dx|", True),
+                           ("T", "T", True), ("production", "σxy du/dx", True),
+                           ("Gamma", "dissipation Γ", True))),
+            plot_profiles(wide, profiles, figdir / "fig9_rotation.png",
+                          f"fig. 9: Ω_z/ω_z and (du/dx)/√T, {w}",
+                          (("omega_ratio", "Ω_z/ω_z", False),
+                           ("gamma_over_sqrtT", "|du/dx| d/√T", False)))]
+    return lines, figs
+
+
+def _stiffness_section(points: pl.DataFrame, profiles: pl.DataFrame, zones: pl.DataFrame,
+                       figdir: Path) -> Section:
+    branches = points.filter(pl.col("parent").str.len_chars() > 0)
+    if not branches.height:
+        return [], []
+    tab = stiffness_table(profiles, points)
+    fam = points.filter(pl.col("W") == branches["W"][0],
+                        pl.col("phi_bar") == branches["phi_bar"][0]).sort("kn")
+    fig = plot_profiles(fam, profiles, figdir / "fig10_stiffness.png",
+                        f"fig. 10: k_n, W = {fam['W'][0]:g}, φ̄ = {fam['phi_bar'][0]:g}",
+                        (("phi", "φ", False), ("u", "u", False),
+                         ("gamma_dot", "|du/dx|", True), ("T", "T", True)),
+                        label=lambda r: f"k_n = {r['kn']:.0e}")
+    lines = ["## Stiffness (fig. 10)", "",
+             "000 §3.3: φ, u, du/dx and T are independent of k_n in the wall and loose "
+             "zones; du/dx, and T more strongly, depend on k_n in the dense shearing and "
+             "plug zones (T in the plug falls as k_n grows). Here: the k_n = 1e5 run's "
+             "final state run on at each k_n (module docstring), compared bin by bin in "
+             "the zones of the k_n = 1e5 run:", "",
+             md_table(tab, {"mean rel. diff.": "+.3f", "median |z|": ".1f", "max |z|": ".1f"}),
+             "", *stiffness_verdict(tab), "",
+             "Zone means with their jackknife SEs (each run's own zones):", "",
+             md_table(stiffness_zone_means(zones, fam["W"][0], fam["phi_bar"][0])), ""]
+    return lines, [fig]
+
+
+def _se_section(se: pl.DataFrame, figdir: Path) -> Section:
+    if not se.height:
+        return [], []
+    shrink = se.join(se.filter(pl.col("fraction") == 1.0), on=["W", "phi_bar", "kn", "seed"],
+                     suffix="_all").group_by("fraction").agg(
+        (pl.col("u_slip_se") / pl.col("u_slip_se_all")).median().alias("SE(u_slip)/SE(all)"),
+        (pl.col("u_max_se") / pl.col("u_max_se_all")).median().alias("SE(u_max)/SE(all)"),
+    ).sort("fraction").with_columns((1 / pl.col("fraction").sqrt()).alias("expected (T^-1/2)"))
+    return (["## Error against run time", "",
+             "The jackknife SEs of u_slip and u_max from the first quarter, half and all "
+             "of each point's steady part, as a ratio to the SE from all of it (median "
+             "over points):", "", md_table(shrink, {}), ""],
+            [plot_campaign_se(se, figdir / "se_vs_time.png")])
+
+
+def _cost_section(points: pl.DataFrame, paper: Any) -> list[str]:
+    per, rate = cost(points)
+    est = paper_scale_estimate(paper, rate)
+    return ["## Cost", "",
+            f"Measured throughput {rate:.3g} particle-steps per core-second (one thread "
+            "a point, two points at a time on this 2-core machine; preparation not "
+            "counted).", "",
+            md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f",
+                           "longest preparation (s)": ".1f", "kn": ".0e"}), "",
+            f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
+            "## The paper-scale campaign (recipe)", "",
+            "000 runs W = 60-150, B = 40, H = 60 + ΔH, φ̄ = 0.59-0.62 at k_n = 1e6 and "
+            "averages over t = 2000-2600. `--paper` (reproduce_000.paper_plan) is that "
+            f"campaign, W = 60, 80, 100, 125, 150 x four φ̄ x 3 seeds: {est['runs']:.0f} "
+            f"runs to t = {paper.t_max:g}, {est['particle-steps']:.3g} particle-steps, "
+            f"about {est['core-hours']:,.0f} core-hours at the measured throughput "
+            f"({est['core-hours'] / 64:,.0f} hours on 64 cores; fewer where a run "
+            "arrests or meets its SE target early).", "",
+            *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")]
+
+
+def findings(points: pl.DataFrame, steady: pl.DataFrame) -> list[str]:
+    """The answers to the paper's claims, in words, from the tables above."""
+    out = ["## Findings", ""]
+    flow = points.filter(pl.col("parent") == "")
+    for (w,), g in flow.sort("phi_bar").group_by(["W"], maintain_order=True):
+        states = ", ".join(f"{p:g}: {s}" for p, s in zip(g["phi_bar"], g["state"],
+                                                          strict=True))
+        out.append(f"- W = {w:g}: {states} (000, W = 60-150: steady for φ̄ = 0.59-0.61, "
+                   "fluctuating at 0.62, jammed above).")
+    for r in ratio_by_width(steady).iter_rows(named=True):
+        out.append(f"- u_max/u_slip at W = {r['W']:g}: {r['u_max/u_slip']} (φ̄ = "
+                   f"{r['phi_bar']}), {r['below 1.37 by']:.3f} below 000's 1.37.")
+    for r in ratio_trend(steady).iter_rows(named=True):
+        out.append(f"- φ̄ = {r['φ̄']:g}: extrapolated to W → ∞ over W = {r['widths']}, "
+                   f"u_max/u_slip → {r['r_inf (W → ∞)']}: "
+                   + ("within 2 SEs of 000's 1.37-1.40." if r["reaches 1.37-1.40"] == "yes"
+                      else "outside 000's 1.37-1.40 by more than 2 SEs."))
+    for r in collapse(steady).iter_rows(named=True):
+        ok = abs(r["in SEs"]) < SIGNIFICANT or abs(r["relative change"]) < 0.02
+        out.append(f"- {r['quantity']} at φ̄ = {r['φ̄']:g}, W {r['widths']}: "
+                   f"{r['relative change']:+.1%} ({r['in SEs']:+.1f} SEs): "
+                   + ("collapses (within 2 % or 3 SEs)." if ok else "does not collapse yet."))
+    return out + [""]
+
+
 def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     """Write the markdown report for the dataset in ``out`` (campaign ``plan``) to ``path``
     (figures beside it, in ``<path stem>_figures/``), with the cost of the ``paper`` plan."""
     points = _read(out, "points")
-    profiles, se = _read(out, "profiles"), _read(out, "se_vs_time")
+    profiles, se, zones = _read(out, "profiles"), _read(out, "se_vs_time"), _read(out, "zones")
     steady = _steady(points)
     figdir = path.parent / f"{path.stem}_figures"
-    rel = path.parent
-    figs: list[Path] = []
     lines = [f"# Reproducing 000: the channel across W and φ̄ ({plan.name} campaign)", "",
              "Generated by `python -m granflow.studies.reproduce_000 "
              f"--{plan.name} --out {out} --report {path}`; the datasets read back with "
              f"`pl.read_parquet('{out}/points.parquet')` (one row per run; also "
              "`profiles.parquet`, half profiles with SEs and zone labels, `zones.parquet`, "
              "zone means, and `se_vs_time.parquet`).", "",
-             "## What was run", "",
-             f"{points.height} channel runs (granflow.scenes.channel.Channel: 000's material "
-             "and contact law, e_n = 0.82, μ_p = 0.5, k_t = 2/7 k_n, the 0.9/1.0/1.1 mix; "
-             "fill and release), at reduced depth and height (B, H below; 000: B = 40, "
-             "H = 60 + ΔH) and k_n = 1e5 with dt = 1.2e-4 √(1e6/k_n) (the stiffness study "
-             "below is the justification). Each runs in stints of "
-             f"{plan.stint:g} √(d/g) until it is steady (the last half of |v_cm| steady or "
-             "fluctuating by granflow.analysis.channel_profiles.flow_state), its steady part "
-             f"(MSER start) spans at least {plan.min_average:g} and the jackknife SEs of "
-             f"u_slip and u_max are within {plan.se_target:.0%}, or it arrests for two stints, "
-             f"or reaches t = {plan.t_max:g}. States: "
-             + ", ".join(f"{k} {v}" for k, v in sorted(
-                 points["state"].value_counts().iter_rows())) + ".", "",
-             md_table(_run_table(points), {"t_start": ".0f", "T_avg": ".0f", "t_run": ".0f",
-                                           "prep (s)": ".1f", "wall (s)": ".0f"}), ""]
+             *findings(points, steady), *_runs_section(points, plan)]
+    figs: list[Path] = []
+    sections = [_stiffness_section(points, profiles, zones, figdir), _se_section(se, figdir)]
     if steady.height:
-        figs += [plot_fig4(steady, profiles, figdir / "fig4_velocity.png"),
-                 plot_fig5(steady, figdir / "fig5_scaling.png"),
-                 plot_fig7(steady, figdir / "fig7_stress_wall_friction.png")]
-        ratio = ratio_by_width(steady)
-        col = collapse(steady)
-        lines += ["## Fig. 5: velocity scaling against W and φ̄", "",
-                  md_table(fig5_table(steady)), "",
-                  "u_max/u_slip per width (000: 1.37-1.40 for W = 60-150 and every φ̄):", "",
-                  md_table(ratio, {"below 1.37 by": ".3f", "in SEs": ".1f"}), ""]
-        if col.height:
-            lines += ["Collapse (000: u/√W and δ0.95/W independent of W for W ≥ 100, not "
-                      "quite at 60): the change between the two widest steady widths per φ̄",
-                      "", md_table(col, {"relative change": "+.3f", "in SEs": "+.1f"}), ""]
-        lines += ["## Zones, plug and conduction length (§3.2, figs 8-9, B13)", "",
-                  f"000: φ in the plug ~{PHI_PLUG_PAPER}, Ω_z/ω_z = 1/2 in the shearing zones, "
-                  f"l_c ≈ {L_C_PAPER} d, σxx ∝ W (fig. 7a), μ_wall independent of W and "
-                  "falling with φ̄ (fig. 7b). xi_plug, xi_ad: the plug edge and the "
-                  "φ = φ_ad crossing (distance from the wall).", "",
-                  md_table(zone_table(steady)), "",
-                  "φ_ad from fig. 13 (000: the loose-zone coefficients diverge as "
-                  "(φ_ad - φ)^-1 with φ_ad = 0.59 ± 0.002): a fit to the loose-zone bins of "
-                  "every steady point, pooled:", "",
-                  md_table(phi_ad_fits(profiles), {"χ²/dof": ".2f",
-                                                   "from 0.59 (SEs)": "+.1f"}), ""]
-        figs.append(plot_fig13(profiles, figdir / "fig13_kinetic.png"))
-        wide = steady.filter(pl.col("W") == steady["W"].max())
-        figs += [
-            plot_profiles(wide, profiles, figdir / "fig6_stress.png",
-                          f"fig. 6: stresses, W = {wide['W'][0]:g}",
-                          (("sigma_xx", "σxx", False), ("sigma_xy", "σxy", False))),
-            plot_profiles(wide, profiles, figdir / "fig8_profiles.png",
-                          f"fig. 8: φ, |du/dx|, T, production, dissipation, W = {wide['W'][0]:g}",
-                          (("phi", "φ", False), ("gamma_dot", "|du/dx|", True),
-                           ("T", "T", True), ("production", "σxy du/dx", True),
-                           ("Gamma", "dissipation Γ", True))),
-            plot_profiles(wide, profiles, figdir / "fig9_rotation.png",
-                          f"fig. 9: Ω_z/ω_z and (du/dx)/√T, W = {wide['W'][0]:g}",
-                          (("omega_ratio", "Ω_z/ω_z", False),
-                           ("gamma_over_sqrtT", "|du/dx| d/√T", False)))]
-    branches = points.filter(pl.col("parent").str.len_chars() > 0)
-    if branches.height:
-        tab = stiffness_table(profiles, points)
-        fam = points.filter(pl.col("W") == branches["W"][0],
-                            pl.col("phi_bar") == branches["phi_bar"][0]).sort("kn")
-        figs.append(plot_profiles(
-            fam, profiles, figdir / "fig10_stiffness.png",
-            f"fig. 10: k_n, W = {fam['W'][0]:g}, φ̄ = {fam['phi_bar'][0]:g}",
-            (("phi", "φ", False), ("u", "u", False), ("gamma_dot", "|du/dx|", True),
-             ("T", "T", True)), label=lambda r: f"k_n = {r['kn']:.0e}"))
-        lines += ["## Stiffness (fig. 10)", "",
-                  "000 §3.3: φ, u, du/dx and T are independent of k_n in the wall and loose "
-                  "zones; du/dx, and T more strongly, depend on k_n in the dense shearing and "
-                  "plug zones (T in the plug falls as k_n grows). Here: the k_n = 1e5 run's "
-                  "final state run on at each k_n (module docstring), compared bin by bin in "
-                  "the zones of the k_n = 1e5 run:", "",
-                  md_table(tab, {"mean rel. diff.": "+.3f", "median |z|": ".1f",
-                                 "max |z|": ".1f"}), "", *stiffness_verdict(tab), ""]
-    if se.height:
-        figs.append(plot_campaign_se(se, figdir / "se_vs_time.png"))
-        shrink = se.join(se.filter(pl.col("fraction") == 1.0),
-                         on=["W", "phi_bar", "kn", "seed"], suffix="_all").group_by(
-            "fraction").agg((pl.col("u_slip_se") / pl.col("u_slip_se_all")).median()
-                            .alias("SE(u_slip)/SE(all)"),
-                            (pl.col("u_max_se") / pl.col("u_max_se_all")).median()
-                            .alias("SE(u_max)/SE(all)")).sort("fraction").with_columns(
-            (1 / pl.col("fraction").sqrt()).alias("expected (T^-1/2)"))
-        lines += ["## Error against run time", "",
-                  "The jackknife SEs of u_slip and u_max from the first quarter, half and all "
-                  "of each point's steady part, as a ratio to the SE from all of it (median "
-                  "over points):", "", md_table(shrink, {}), ""]
-    lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
+        sections[:0] = [_fig5_section(steady, profiles, figdir),
+                        _zones_section(steady, profiles, figdir)]
+    for text, f in sections:
+        lines += text
+        figs += f
+    lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(path.parent)})"
+                                   for p in figs] + [""]
     if points.height and points["steps"].sum():
-        per, rate = cost(points)
-        est = paper_scale_estimate(paper, rate)
-        lines += ["## Cost", "",
-                  f"Measured throughput {rate:.3g} particle-steps per core-second (one thread "
-                  "a point, two points at a time on this 2-core machine; preparation not "
-                  "counted).", "",
-                  md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f",
-                                 "longest preparation (s)": ".1f", "kn": ".0e"}), "",
-                  f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
-                  "## The paper-scale campaign (recipe)", "",
-                  "000 runs W = 60-150, B = 40, H = 60 + ΔH, φ̄ = 0.59-0.62 at k_n = 1e6 and "
-                  "averages over t = 2000-2600. `--paper` (reproduce_000.paper_plan) is that "
-                  f"campaign, W = 60, 80, 100, 125, 150 x four φ̄ x 3 seeds: {est['runs']:.0f} "
-                  f"runs to t = {paper.t_max:g}, {est['particle-steps']:.3g} particle-steps, "
-                  f"about {est['core-hours']:,.0f} core-hours at the measured throughput "
-                  f"({est['core-hours'] / 64:,.0f} hours on 64 cores; fewer where a run "
-                  "arrests or meets its SE target early).", "",
-                  *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")]
+        lines += _cost_section(points, paper)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
