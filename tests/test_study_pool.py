@@ -25,11 +25,33 @@ if __name__ == "__main__":
         pass
 """
 
+# tasks that simulate (a run turns SIGTERM into a clean stop of the run, and the worker then
+# takes the next queued task: more tasks than workers)
+SIMULATING = """
+import os
+import granflow as gf
+from granflow.study import map_tasks
+
+def simulate(i, threads):
+    box = gf.Box(length=(6.0, 6.0, 6.0))
+    x, d = gf.random_packing(gf.sizes.uniform(0.9, 1.1), box, 0.3, seed=i)
+    sim = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e5, e_n=0.8, mu=0.5), threads=1,
+                        velocities=gf.maxwell_velocities(len(d), 1.0, seed=i))
+    print("worker", os.getpid(), flush=True)
+    while True:
+        sim.run(200, progress=False)
+
+if __name__ == "__main__":
+    for _ in map_tasks(simulate, [(i,) for i in range(6)], workers=2):
+        pass
+"""
+
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
-def test_workers_end_with_a_killed_parent(tmp_path):
+@pytest.mark.parametrize("source", [SCRIPT, SIMULATING], ids=["sleeping", "simulating"])
+def test_workers_end_with_a_killed_parent(tmp_path, source):
     script = tmp_path / "pool.py"
-    script.write_text(SCRIPT)
+    script.write_text(source)
     # the granflow this test imports (installed, or the source tree with its extension)
     env = {**os.environ, "PYTHONPATH": str(Path(granflow.__file__).resolve().parents[1])}
     proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True,

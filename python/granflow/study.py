@@ -81,12 +81,15 @@ def _one(spec: dict[str, Any], directory: str, threads: int) -> dict[str, Any]:
 def _die_with_parent() -> None:
     """A pool worker's start: ask Linux to end it with its parent. A parent killed outright
     (SIGTERM, SIGKILL) leaves its workers running their tasks otherwise, orphans that go on
-    writing the same run directories as the next sweep (found with a stopped campaign)."""
+    writing the same run directories as the next sweep (found with a stopped campaign).
+    SIGKILL, not SIGTERM: a task inside a run turns SIGTERM into a clean stop of that run
+    (simulation.run_chunked), and the worker then takes the next queued task; orphans of a
+    stopped campaign ran its queued points for an hour beside the next campaign that way."""
     if sys.platform.startswith("linux"):
         import ctypes
         import signal
 
-        ctypes.CDLL(None).prctl(1, int(signal.SIGTERM))  # 1 = PR_SET_PDEATHSIG
+        ctypes.CDLL(None).prctl(1, int(signal.SIGKILL))  # 1 = PR_SET_PDEATHSIG
 
 
 def map_tasks(fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],
