@@ -587,7 +587,13 @@ def _se_section(se: pl.DataFrame, figdir: Path) -> Section:
     return (["## Error against run time", "",
              "The jackknife SEs of u_slip and u_max from the first quarter, half and all "
              "of each point's steady part, as a ratio to the SE from all of it (median "
-             "over points):", "", md_table(shrink, {}), ""],
+             "over points). A stationary series' SE shrinks as T^-1/2 (last column); where "
+             "the ratios fall short of it, or below 1, the shorter stretch's SE is too "
+             "small: its few blocks do not see the flow's slow wandering (the channel's "
+             "mean velocity drifts by a few % over hundreds of √(d/g), flow_state's "
+             "rel_drift), which the whole part's SE contains. The SEs reported above are "
+             "the whole part's; a point's first quarter alone would claim a smaller error "
+             "than it has.", "", md_table(shrink, {}), ""],
             [plot_campaign_se(se, figdir / "se_vs_time.png")])
 
 
