@@ -60,23 +60,19 @@ def fig5_table(steady: pl.DataFrame) -> pl.DataFrame:
     return pl.DataFrame(rows)
 
 
-def _wmean(v: np.ndarray, e: np.ndarray) -> tuple[float, float]:
-    """Inverse-variance mean and its SE."""
-    ok = np.isfinite(v) & np.isfinite(e) & (e > 0)
-    if not ok.any():
-        return math.nan, math.nan
-    w = 1 / e[ok] ** 2
-    return float(np.sum(w * v[ok]) / np.sum(w)), float(1 / math.sqrt(np.sum(w)))
-
-
 def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
-    """u_max/u_slip per W (inverse-variance mean over phi_bar) and its distance from 000's
-    range 1.37-1.40 in SEs."""
+    """u_max/u_slip per W (inverse-variance mean over phi_bar, rheology.pool_realizations)
+    and its distance from 000's range 1.37-1.40 in SEs."""
+    from granflow.analysis.rheology import pool_realizations
+
+    cols = ["W", "u_max_over_u_slip", "u_max_over_u_slip_se"]
+    pooled = pool_realizations(steady.select(cols), by=["W"])
     rows = []
-    for (w,), g in steady.group_by(["W"], maintain_order=True):
-        m, e = _wmean(g["u_max_over_u_slip"].to_numpy(), g["u_max_over_u_slip_se"].to_numpy())
+    for r in pooled.iter_rows(named=True):
+        m, e = r["u_max_over_u_slip"], r["u_max_over_u_slip_se"]
+        phis = steady.filter(pl.col("W") == r["W"])["phi_bar"]
         gap = max(RATIO_PAPER[0] - m, m - RATIO_PAPER[1], 0.0)
-        rows.append({"W": w, "phi_bar": ", ".join(f"{p:g}" for p in g["phi_bar"]),
+        rows.append({"W": r["W"], "phi_bar": ", ".join(f"{p:g}" for p in phis),
                      "u_max/u_slip": pm(m, e, 4), "below 1.37 by": gap,
                      "in SEs": gap / e if e > 0 else math.nan})
     return pl.DataFrame(rows)
