@@ -121,7 +121,7 @@ def _u_max(q: Mapping[str, FloatArray]) -> float:
     return float(q["u"][-1])
 
 
-def _delta_095(xi: FloatArray, q: Mapping[str, FloatArray]) -> float:
+def delta_095_profile(xi: FloatArray, q: Mapping[str, FloatArray]) -> float:
     """First distance from the wall where the scaled velocity reaches 0.95 (linear
     interpolation between bin centres)."""
     u = q["u"]
@@ -202,13 +202,13 @@ def velocity_scaling(prof: ChannelProfiles) -> dict[str, Estimate]:
     u_se = tab["u_se"].to_numpy()
     sigma = u_se if np.all(np.isfinite(u_se) & (u_se > 0)) else None
     q0 = prof.derived()
-    d0 = _delta_095(xi, q0)
+    d0 = delta_095_profile(xi, q0)
     p0 = (_u_slip(q0), _u_max(q0), max(d0, 1e-3 * W) if np.isfinite(d0) else 0.2 * W)
     width = prof.width_full
 
     def fn(q: Mapping[str, FloatArray]) -> FloatArray:
         us, um = _u_slip(q), _u_max(q)
-        dl = _delta_095(xi, q)
+        dl = delta_095_profile(xi, q)
         res31 = (
             float(np.sqrt(np.mean(((q["u"] - us) / (um - us) - scaled_profile_31(xi, dl)) ** 2)))
             if np.isfinite(dl)
@@ -239,7 +239,7 @@ def velocity_scaling(prof: ChannelProfiles) -> dict[str, Estimate]:
         u = prof.sign * np.asarray(m["u_y"])
         q = prof.derived(m)
         measured = float(np.sum(u * width) / np.sum(width))
-        dl = _delta_095(xi, q)
+        dl = delta_095_profile(xi, q)
         pred = mean_velocity_32(_u_slip(q), _u_max(q), dl, W) if np.isfinite(dl) else np.nan
         return np.array([measured, pred, measured / pred])
 

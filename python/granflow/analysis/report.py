@@ -276,7 +276,7 @@ def _channel_scalars(
     def fn(m: Mapping[str, FloatArray]) -> FloatArray:
         q = prof.derived(m)
         return np.array(
-            [q["u"][0], q["u"][-1], ch._delta_095(xi, q), float(np.mean(q["sigma_xx"]))]
+            [q["u"][0], q["u"][-1], ch.delta_095_profile(xi, q), float(np.mean(q["sigma_xx"]))]
         )
 
     return ["u_slip", "u_max", "delta_0.95", "sigma_xx"], fn

@@ -197,6 +197,28 @@ def observable_columns(series: TableLike) -> list[str]:
     ]
 
 
+#: the channel's variables from a cell series (:func:`gradient_frame`)
+GRADIENT_COLUMNS = ("mu_g", "I_g", "sigma_g_p")
+
+
+def gradient_frame(series: TableLike) -> pl.DataFrame:
+    """A cell ``series`` with the shear measured as the channel of 000 measures it: against
+    the normal stress on the shear planes, not the pressure. The cell's H is upper
+    triangular, so L_yx = 0 and its mean flow is along x with the gradient along y: the
+    gradient normal stress is sigma_yy (the channel's sigma_xx). Added per sample:
+    ``mu_g = -sigma_xy/sigma_yy`` (002 (2.11): tau_ext > 0 gives sigma_xy = -tau), ``I_g =
+    2 |D| a/sqrt(sigma_yy/rho) = 2 I sqrt(p/sigma_yy)`` (the cell's I is |D| a/sqrt(p/rho),
+    |D| = gamma_dot/2 in simple shear; the channel's is |du/dx| d/sqrt(sigma_xx/rho_p)) and
+    ``sigma_g_p = sigma_yy/p``."""
+    d = to_polars(series)
+    syy = pl.col("sigma_yy")
+    return d.with_columns(
+        (-pl.col("sigma_xy") / syy).alias("mu_g"),
+        (2.0 * pl.col("I") * (pl.col("p") / syy).sqrt()).alias("I_g"),
+        (syy / pl.col("p")).alias("sigma_g_p"),
+    )
+
+
 @dataclass
 class RunState:
     """Flow / arrest classification of one cell run.
@@ -459,6 +481,8 @@ class FitResult:
     @quiet
     def __call__(self, I: npt.ArrayLike) -> FloatArray:  # noqa: E741
         """The fitted law at ``I``."""
+        if self.law == JOP:
+            return jop_value(I, *self.params.values())
         return law_value(self.law, I, *self.params.values())
 
 
@@ -576,6 +600,56 @@ def fit_law(
         n,
         True,
     )
+
+
+#: the mu(I) form of Jop, Forterre & Pouliquen (Nature 2006), mu = mu_s + (mu_2 - mu_s)/(1 +
+#: I_0/I): linear in I at small I, where (4.2) with a1 < 1 has an infinite slope and so
+#: continues to a lower yield ratio; the form continuum models of granular flow take
+JOP = "mu_jop"
+JOP_EQUATION = "mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) (Jop et al. 2006)"
+
+
+def jop_value(I: npt.ArrayLike, mu_s: float, mu_2: float, I_0: float) -> FloatArray:  # noqa: E741
+    """Jop et al.'s mu(I) at ``I``."""
+    ii = np.asarray(I, dtype=np.float64)
+    return mu_s + (mu_2 - mu_s) * ii / (ii + I_0)
+
+
+@quiet
+def fit_jop(I: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike,  # noqa: E741
+            *, I_se: npt.ArrayLike | None = None) -> FitResult:
+    """Weighted fit of Jop et al.'s mu(I) (constants mu_s, mu_2, I_0), the SE of I
+    propagated by effective variance as in :func:`fit_law`; bounds mu_2 > mu_s is not
+    imposed (a fit that ends with mu_2 <= mu_s is reported as it is), I_0 > 0."""
+    ii, yy, sy = (np.asarray(v, dtype=np.float64) for v in (I, y, y_se))
+    si = np.zeros_like(ii) if I_se is None else np.asarray(I_se, dtype=np.float64)
+    ok = np.isfinite(ii) & np.isfinite(yy) & np.isfinite(sy) & (sy > 0) & (ii > 0)
+    ok &= np.isfinite(si)
+    ii, yy, sy, si = ii[ok], yy[ok], sy[ok], si[ok]
+    names = ("mu_s", "mu_2", "I_0")
+    n = int(ii.size)
+    nan3 = dict.fromkeys(names, math.nan)
+    if n < 4:
+        return FitResult(JOP, JOP_EQUATION, nan3, dict(nan3), np.full((3, 3), np.nan),
+                         math.nan, n - 3, n, False, "fewer than 4 usable points")
+    start = (float(yy.min()) - 0.02, float(yy.max()) + 0.2, float(np.median(ii)))
+    bounds = ([-np.inf, -np.inf, 1e-9], [np.inf, np.inf, np.inf])
+    sigma = sy
+    try:
+        p, cov = optimize.curve_fit(jop_value, ii, yy, p0=start, sigma=sigma,
+                                    absolute_sigma=True, bounds=bounds, maxfev=20000)
+        if I_se is not None:
+            slope = (p[1] - p[0]) * p[2] / (ii + p[2]) ** 2
+            sigma = np.sqrt(sy**2 + (slope * si) ** 2)
+            p, cov = optimize.curve_fit(jop_value, ii, yy, p0=p, sigma=sigma,
+                                        absolute_sigma=True, bounds=bounds, maxfev=20000)
+    except (RuntimeError, ValueError) as exc:
+        return FitResult(JOP, JOP_EQUATION, nan3, dict(nan3), np.full((3, 3), np.nan),
+                         math.nan, n - 3, n, False, str(exc))
+    chi2 = float(np.sum(((yy - jop_value(ii, *p)) / sigma) ** 2))
+    err = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return FitResult(JOP, JOP_EQUATION, dict(zip(names, map(float, p), strict=True)),
+                     dict(zip(names, map(float, err), strict=True)), cov, chi2, n - 3, n, True)
 
 
 @quiet

@@ -7,7 +7,10 @@
 - :mod:`granflow.studies.reproduce_000` — the channel across widths, volume fractions and
   stiffnesses, and its report (``python -m granflow.studies.reproduce_000``);
 - :mod:`granflow.studies.reproduce_002` — the cell's Table 1 and figures 3-8, and its report
-  (``python -m granflow.studies.reproduce_002``).
+  (``python -m granflow.studies.reproduce_002``);
+- :mod:`granflow.studies.cross_scene` — the channel predicted from the cell (local mu(I) and
+  nonlocal fluidity, calibrated in the cell), and its report
+  (``python -m granflow.studies.cross_scene``).
 
-Both reproductions run as resumable campaigns (:mod:`granflow.studies._campaign`).
+The three run as resumable campaigns (:mod:`granflow.studies._campaign`).
 """

@@ -124,10 +124,12 @@ def dask_recipe(module: str, out: str, walltime: str) -> list[str]:
 def cli(argv: Iterable[str] | None, *, module: str, description: str,
         plans: Mapping[str, tuple[Callable[[], Any], str]],
         reanalyse: Callable[[Path, Any], int], run_campaign: Callable[..., Any],
-        write_report: Callable[[Path, Path, Any], Path]) -> None:
+        write_report: Callable[..., Path],
+        options: Mapping[str, tuple[str, str]] | None = None) -> None:
     """The command line of a reproduction campaign: ``--quick`` (default), ``--full`` or
     ``--paper`` (``plans``: name -> (plan factory, help)), ``--out``, ``--report``,
-    ``--workers`` / ``--scheduler``, ``--reanalyse``, ``--only-report``."""
+    ``--workers`` / ``--scheduler``, ``--reanalyse``, ``--only-report``; ``options`` (name ->
+    (default, help)) are further string options, passed to ``write_report`` by keyword."""
     import argparse
 
     ap = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
@@ -143,6 +145,8 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     ap.add_argument("--only-report", action="store_true", help="no runs, the report only")
     ap.add_argument("--reanalyse", action="store_true",
                     help="first recompute the finished points from the data kept in OUT/work")
+    for name, (default, text) in (options or {}).items():
+        ap.add_argument(f"--{name}", default=default, help=f"{text} (default {default})")
     a = ap.parse_args(list(argv) if argv is not None else None)
     chosen = next((n for n in plans if getattr(a, n)), "quick")
     plan = plans[chosen][0]()
@@ -151,5 +155,6 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
     if not a.only_report:
         run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler)
-    path = write_report(out, Path(a.report) if a.report else out / "report.md", plan)
+    path = write_report(out, Path(a.report) if a.report else out / "report.md", plan,
+                        **{k: getattr(a, k) for k in options or {}})
     print(f"report: {path}")

@@ -79,6 +79,11 @@ class Plan:
     #: shear strain (2 |D| T, engineering) the steady part must span: an SE target is easily
     #: met by a short stretch of a slow flow (p = 1e-5 met it after 0.3 of strain, dilating)
     min_strain: float = 2.0
+    #: the cell's material beyond (mu_s, N, p_ext, tau/p): ShearCell keywords (e.g. the
+    #: channel's size_mix, kt_ratio, e_n, dt_frac in granflow.studies.cross_scene)
+    cell_options: Mapping[str, Any] = field(default_factory=dict)
+    #: observables kept per point (OBSERVABLES, and rheology.GRADIENT_COLUMNS if wanted)
+    observables: tuple[str, ...] = OBSERVABLES
 
     def max_steps(self, n: int) -> int:
         return int(self.max_shear_steps.get(n, max(self.max_shear_steps.values())))
@@ -157,15 +162,15 @@ def quick_plan() -> Plan:
 # one point
 # --------------------------------------------------------------------------------------------
 def _steady_series(series: pa.Table, t0: float) -> pl.DataFrame:
-    s = pl.from_arrow(series)
-    assert isinstance(s, pl.DataFrame)
-    return s.filter(pl.col("t") > t0)
+    from granflow.analysis.rheology import gradient_frame
+
+    return gradient_frame(series).filter(pl.col("t") > t0)
 
 
-def _analyse(s: pl.DataFrame) -> dict[str, Any]:
+def _analyse(s: pl.DataFrame, observables: Iterable[str] = OBSERVABLES) -> dict[str, Any]:
     from granflow.analysis import rheology as rh
 
-    cols = [c for c in OBSERVABLES if c in s.columns]
+    cols = [c for c in observables if c in s.columns]
     res = rh.analyse_run(s, columns=cols)
     out: dict[str, Any] = {"state": res.state.state, "t_start": res.state.t_start,
                            "T_avg": float(s["t"][-1] - res.state.t_start)}
@@ -209,7 +214,7 @@ def point_row(point: Point, plan: Plan, series: pa.Table, shear0: float) -> dict
     s = _steady_series(series, shear0)
     row: dict[str, Any] = {**asdict(point), "state": "short", "converged": False}
     if s.height >= 200:
-        row.update(_analyse(s))
+        row.update(_analyse(s, plan.observables))
         row["converged"] = _converged(row, plan)
     row["se_rows"] = (_se_rows(point, s, float(row["t_start"])) if row["state"] == "flowing"
                       else [])
@@ -228,7 +233,8 @@ def run_point(point: Point, plan: Plan, work: str, threads: int = 1) -> dict[str
     d.mkdir(parents=True, exist_ok=True)
     ck, tab, meta = d / "checkpoint.gfck", d / "series.parquet", d / "meta.json"
     cell = ShearCell(N=point.N, mu_s=point.mu_s, p_ext=point.p_ext, tau_ratio=point.tau_ratio,
-                     seed=point.seed, sample_every=plan.sample_every, threads=threads)
+                     seed=point.seed, sample_every=plan.sample_every, threads=threads,
+                     **plan.cell_options)
     wall = 0.0
     if ck.exists() and meta.exists():
         cell.restore(ck)

@@ -1,0 +1,93 @@
+"""Predict the channel of 000 from the cell of 002: a local mu(I), phi(I) law and the nonlocal
+granular fluidity model (Henann & Kamrin 2013), calibrated in the stress-controlled cell with
+the channel's material, laid over the channel's DEM profiles at several widths.
+
+    python -m granflow.studies.cross_scene --quick [--out DIR] [--report FILE]
+    python -m granflow.studies.cross_scene --full [--out DIR] [--report FILE] [--workers N]
+           [--channel DIR] [--reanalyse] [--only-report]
+
+This module is the command and the calibration campaign's plans; the analysis is
+:mod:`granflow.studies.cross_scene_predict`, the report
+:mod:`granflow.studies.cross_scene_report`. The chain: (1) the calibration campaign, cell runs
+(granflow.studies.reproduce_002's points and stopping rule) with the channel's particles and
+contact law (cross_scene_predict.channel_material) at the channel's pressure scale, appended
+point by point to ``OUT/points.parquet`` (resumable); (2) fits of mu(I) and phi(I) in the
+channel's variables (rheology.gradient_frame) with their covariance, ``OUT/fits.parquet``; (3)
+the continuum solutions (granflow.continuum) for every steady channel run of the reproduce_000
+dataset (``--channel``, default the committed docs/data/reproduce_000), the nonlocal amplitude
+fitted on one width only; (4) the report (cross_scene_report), with the comparison tables also
+written beside the points (cases, compare, model_profiles, residuals, boundary).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from granflow.analysis.rheology import GRADIENT_COLUMNS
+
+from .cross_scene_predict import channel_material
+from .reproduce_002 import OBSERVABLES, Plan, Point
+
+#: the channel's particle friction (000: mu = 0.5), the cell's mu_s
+MU_CHANNEL = 0.5
+#: the channel's pressure scale, sigma_xx d/kn: 1.7e-4 (W = 20) to 5.3e-4 (W = 60) in the
+#: reproduce_000 runs at kn = 1e5; the cell's p_ext a/kn (kn = 1 there) at both ends
+P_LOW, P_HIGH = 2e-4, 5e-4
+#: tau/p from below yield to runaway (a ratio that arrests or runs away is kept as such)
+RATIOS = (0.38, 0.40, 0.42, 0.44, 0.46, 0.48, 0.50, 0.55, 0.60, 0.65, 0.675, 0.70, 0.75)
+#: near yield, where N = 2000 creeps intermittently or arrests: more seeds, and N = 10,000
+NEAR_YIELD = (0.40, 0.405, 0.41, 0.415)
+NEAR_YIELD_LARGE = (0.40, 0.41, 0.42)
+
+
+#: observables kept per calibration point
+CAL_OBSERVABLES = (*OBSERVABLES, *GRADIENT_COLUMNS, "sigma_yy")
+
+
+def _plan(name: str, points: Iterable[Point], **kw: Any) -> Plan:
+    return Plan(name, tuple(dict.fromkeys(points)), cell_options=channel_material(),
+                observables=CAL_OBSERVABLES, **kw)
+
+
+def full_plan() -> Plan:
+    """N = 2000 over RATIOS at p a/kn = 2e-4 and 5e-4 (seed 1, then seed 2), then near yield
+    NEAR_YIELD with seeds 1-3 and NEAR_YIELD_LARGE at N = 10,000 (p = 2e-4), then NEAR_YIELD
+    at 5e-4 (seeds 1-3)."""
+    pts = [Point(MU_CHANNEL, r, s, p_ext=p) for s in (1, 2) for p in (P_LOW, P_HIGH)
+           for r in RATIOS]
+    pts += [Point(MU_CHANNEL, r, s, p_ext=P_LOW) for s in (1, 2, 3) for r in NEAR_YIELD]
+    pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in NEAR_YIELD_LARGE]
+    pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in (1, 2, 3) for r in NEAR_YIELD]
+    return _plan("full", pts, stint=20_000,
+                 max_shear_steps={2000: 1_000_000, 10_000: 400_000})
+
+
+def quick_plan() -> Plan:
+    """Minutes on two cores: N = 500, five ratios, one seed, SE target 2 %."""
+    pts = [Point(MU_CHANNEL, r, 1, N=500, p_ext=P_LOW) for r in (0.45, 0.5, 0.55, 0.6, 0.65)]
+    return _plan("quick", pts, se_target=0.02, stint=10_000, max_shear_steps={500: 100_000})
+
+
+# --------------------------------------------------------------------------------------------
+# (4) the command
+# --------------------------------------------------------------------------------------------
+#: the channel dataset the study predicts (the committed reproduce_000 campaign)
+CHANNEL_DATA = "docs/data/reproduce_000"
+
+
+def main(argv: Iterable[str] | None = None) -> None:
+    from granflow.studies.cross_scene_report import write_report
+
+    from ._campaign import cli
+    from .reproduce_002 import reanalyse, run_campaign
+
+    cli(argv, module="granflow.studies.cross_scene", description=(__doc__ or "").splitlines()[0],
+        plans={"quick": (quick_plan, "minutes-long calibration subset (default)"),
+               "full": (full_plan, "the calibration campaign")},
+        reanalyse=reanalyse, run_campaign=run_campaign, write_report=write_report,
+        options={"channel": (CHANNEL_DATA, "the reproduce_000 dataset to predict")})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,111 @@
+"""The cross-scene study (granflow.studies.cross_scene): the cell measured in the channel's
+variables, the calibration's fits, and the whole chain on its --quick plan against the committed
+channel dataset."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+from granflow.analysis import rheology as rh
+from granflow.errors import ParameterError
+from granflow.scenes.cell import contact_time
+from granflow.studies import cross_scene as cs
+from granflow.studies import cross_scene_predict as csp
+
+CHANNEL = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
+
+
+def test_the_gradient_frame_is_the_channels_measure():
+    # simple shear v_x = g y under p, tau and a gradient normal stress sigma_yy != p: the
+    # cell's I = |D| a/sqrt(p/rho) = (g/2)/sqrt(p); the channel's is g/sqrt(sigma_yy)
+    g, p, syy, tau = 0.01, 2e-4, 2.1e-4, 0.9e-4
+    cell_i = (g / 2) / math.sqrt(p)
+    s = pl.DataFrame({"I": [cell_i], "p": [p], "sigma_yy": [syy], "sigma_xy": [-tau]})
+    out = rh.gradient_frame(s).row(0, named=True)
+    assert out["I_g"] == pytest.approx(g / math.sqrt(syy), rel=1e-12)
+    assert out["mu_g"] == pytest.approx(tau / syy, rel=1e-12)
+    assert out["sigma_g_p"] == pytest.approx(syy / p, rel=1e-12)
+
+
+def test_jop_fit_recovers_its_constants_and_their_errors():
+    rng = np.random.default_rng(4)
+    true = (0.37, 0.8, 0.5)
+    ii = np.geomspace(0.05, 0.8, 9)
+    se = np.full(ii.size, 0.002)
+    fits = [rh.fit_jop(ii, rh.jop_value(ii, *true) + rng.normal(0, se), se) for _ in range(200)]
+    assert all(f.success for f in fits)
+    vals = np.array([list(f.params.values()) for f in fits])
+    errs = np.array([list(f.errors.values()) for f in fits])
+    # unbiased, and the covariance's errors are the scatter of the constants (to ~20 %)
+    assert np.all(np.abs(vals.mean(0) - true) < 3 * vals.std(0) / math.sqrt(len(fits)) + 1e-3)
+    assert np.allclose(errs.mean(0), vals.std(0), rtol=0.2)
+    assert fits[0](0.2) == pytest.approx(float(rh.jop_value(0.2, *fits[0].params.values())))
+    # chi^2 per degree of freedom ~ 1 for Gaussian noise of the stated SE
+    assert 0.8 < np.mean([f.red_chi2 for f in fits]) < 1.2
+
+
+def test_the_cell_takes_the_channels_material():
+    mat = csp.channel_material()
+    assert mat["size_mix"] == {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}
+    assert mat["kt_ratio"] == pytest.approx(2 / 7) and mat["e_n"] == 0.82
+    # the channel's dt per contact time: 1.2e-4 sqrt(1e6/kn) at the mean pair's t_c
+    m = np.pi / 6 * (0.3 * 0.9**3 + 0.4 + 0.3 * 1.1**3)
+    for kn in (1e5, 1e6, 1e7):
+        dt = 1.2e-4 * math.sqrt(1e6 / kn)
+        assert mat["dt_frac"] * contact_time(kn, m / 2, "collision", 0.82) == pytest.approx(dt)
+
+
+def test_a_calibration_needs_four_steady_points():
+    rows = [{"p_ext": 2e-4, "tau_ratio": r, "state": "flowing", "converged": True,
+             "I_g": 0.1 * r, "I_g_se": 1e-3, "mu_g": r, "mu_g_se": 1e-3, "phi": 0.6 - r / 10,
+             "phi_se": 1e-3, "sigma_g_p": 1.05, "sigma_g_p_se": 1e-3} for r in (0.45, 0.5, 0.6)]
+    with pytest.raises(ParameterError, match="p_ext = 0.0002: 3 steady points"):
+        csp.calibrate(pl.DataFrame(rows))
+
+
+def test_a_channel_dataset_without_steady_runs_is_refused(tmp_path):
+    for f in ("points", "profiles"):
+        pl.read_parquet(CHANNEL / f"{f}.parquet").head(0).write_parquet(tmp_path / f"{f}.parquet")
+    with pytest.raises(ParameterError, match="no steady run"):
+        csp.channel_cases(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cross")
+    report = out / "cross_scene.md"
+    cs.main(["--quick", "--out", str(out), "--report", str(report), "--workers", "1",
+             "--channel", str(CHANNEL)])
+    return out, report
+
+
+def test_the_quick_chain_writes_its_datasets_and_report(quick):
+    out, report = quick
+    pts = pl.read_parquet(out / "points.parquet")
+    assert pts.height == len(cs.quick_plan().points)
+    fits = pl.read_parquet(out / "fits.parquet")
+    assert set(fits["law"].to_list()) == {"mu", "phi", "mu (4.2)"}
+    assert all(len(c) == 9 for c in fits["cov"].to_list())
+    cases = pl.read_parquet(out / "cases.parquet")
+    assert sorted(set(cases["W"].to_list())) == [20.0, 40.0, 60.0]
+    # the local law cannot shear a channel whose wall stress ratio is below its yield ratio
+    mu_s = fits.filter(pl.col("law") == "mu")["c0"][0]
+    for r in cases.filter(pl.col("mu_wall") < mu_s).iter_rows(named=True):
+        assert r["local_du"] < 0.05 * r["dem_du"]
+    for col in ("local_du", "nonlocal_du", "nonlocal_u_rel", "A_best"):
+        assert cases[col].is_finite().all(), col
+    z = pl.read_parquet(out / "compare.parquet")
+    assert set(z["model"].to_list()) == {"local", "nonlocal"}
+    assert set(z["zone"].to_list()) <= set(csp.ZONES) and z["u_rel"].is_finite().all()
+    b = pl.read_parquet(out / "boundary.parquet")
+    assert sorted(set(b["bin"].to_list())) == list(csp.BOUNDARY_BINS)
+    assert (b["A_best"] > 0).all() and b["u_rel_held"].is_finite().all()
+    text = report.read_text()
+    for key in ("Nonlocal amplitude: A =", "Misfit per zone", "core-hours", "## Time"):
+        assert key in text, key
+    figs = sorted((out / "cross_scene_figures").glob("*.png"))
+    assert len(figs) == 4 and all(f"cross_scene_figures/{f.name}" in text for f in figs)
