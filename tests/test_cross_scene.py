@@ -11,6 +11,7 @@ import numpy as np
 import polars as pl
 import pytest
 from granflow.analysis import rheology as rh
+from granflow.continuum import LocalLaw
 from granflow.errors import ParameterError
 from granflow.scenes.cell import contact_time
 from granflow.studies import cross_scene as cs
@@ -71,6 +72,21 @@ def test_a_channel_dataset_without_steady_runs_is_refused(tmp_path):
     for f in ("points", "profiles"):
         pl.read_parquet(CHANNEL / f"{f}.parquet").head(0).write_parquet(tmp_path / f"{f}.parquet")
     with pytest.raises(ParameterError, match="no steady run"):
+        csp.channel_cases(tmp_path)
+
+
+def test_a_law_calibrated_below_the_channels_stress_is_refused():
+    # the W = 60, phi_bar = 0.59 run needs a wall stress ratio of ~0.42: a law calibrated
+    # only up to I = 0.05 (mu ~ 0.40) does not cover it, in either model
+    case = next(c for c in csp.channel_cases(CHANNEL) if c.W == 60 and c.phi_bar == 0.59)
+    short = LocalLaw(0.36, 0.47, 0.56, 0.59, 0.16, 1.0, 0.03, 0.05, mu_form="jop")
+    for model in ("local", "nonlocal"):
+        with pytest.raises(ParameterError, match=r"mu\(I_max\).*calibrate"):
+            csp.solve(model, short, case, 0.5)
+
+
+def test_a_missing_channel_dataset_is_named(tmp_path):
+    with pytest.raises(ParameterError, match="no points.parquet, profiles.parquet"):
         csp.channel_cases(tmp_path)
 
 

@@ -619,8 +619,9 @@ def jop_value(I: npt.ArrayLike, mu_s: float, mu_2: float, I_0: float) -> FloatAr
 def fit_jop(I: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike,  # noqa: E741
             *, I_se: npt.ArrayLike | None = None) -> FitResult:
     """Weighted fit of Jop et al.'s mu(I) (constants mu_s, mu_2, I_0), the SE of I
-    propagated by effective variance as in :func:`fit_law`; bounds mu_2 > mu_s is not
-    imposed (a fit that ends with mu_2 <= mu_s is reported as it is), I_0 > 0."""
+    propagated by effective variance as in :func:`fit_law`. Only I_0 > 0 is bounded: a fit
+    that ends with mu_2 <= mu_s is returned as it is (granflow.continuum.LocalLaw refuses
+    it by name)."""
     ii, yy, sy = (np.asarray(v, dtype=np.float64) for v in (I, y, y_se))
     si = np.zeros_like(ii) if I_se is None else np.asarray(I_se, dtype=np.float64)
     ok = np.isfinite(ii) & np.isfinite(yy) & np.isfinite(sy) & (sy > 0) & (ii > 0)

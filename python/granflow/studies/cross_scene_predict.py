@@ -189,6 +189,11 @@ class ChannelCase:
 def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5) -> list[ChannelCase]:
     """The steady runs at ``kn`` of a reproduce_000 dataset (points and profiles)."""
     d = Path(channel)
+    missing = [f for f in ("points.parquet", "profiles.parquet") if not (d / f).is_file()]
+    if missing:
+        raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no "
+                             f"{', '.join(missing)} (allowed a reproduce_000 dataset, e.g. "
+                             "docs/data/reproduce_000 of a granflow checkout)")
     pts = pl.read_parquet(d / "points.parquet").filter(
         (pl.col("kn") == kn) & pl.col("u_slip").is_not_null())
     prof = pl.read_parquet(d / "profiles.parquet")
