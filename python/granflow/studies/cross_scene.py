@@ -39,6 +39,9 @@ RATIOS = (0.38, 0.40, 0.42, 0.44, 0.46, 0.48, 0.50, 0.55, 0.60, 0.65, 0.675, 0.7
 #: near yield, where N = 2000 creeps intermittently or arrests: more seeds, and N = 10,000
 NEAR_YIELD = (0.40, 0.405, 0.41, 0.415)
 NEAR_YIELD_LARGE = (0.40, 0.41, 0.42)
+#: below 0.40 at N = 10,000 (N = 2000 arrests at 0.38 and, for some seeds, at 0.40): does a
+#: larger cell hold a slower steady flow? (run last)
+BELOW_YIELD_LARGE = (0.39, 0.395, 0.385, 0.38)
 
 
 #: observables kept per calibration point
@@ -53,12 +56,13 @@ def _plan(name: str, points: Iterable[Point], **kw: Any) -> Plan:
 def full_plan() -> Plan:
     """N = 2000 over RATIOS at p a/kn = 2e-4 and 5e-4 (seed 1, then seed 2), then near yield
     NEAR_YIELD with seeds 1-3 and NEAR_YIELD_LARGE at N = 10,000 (p = 2e-4), then NEAR_YIELD
-    at 5e-4 (seeds 1-3)."""
+    at 5e-4 (seeds 1-3), then BELOW_YIELD_LARGE at N = 10,000."""
     pts = [Point(MU_CHANNEL, r, s, p_ext=p) for s in (1, 2) for p in (P_LOW, P_HIGH)
            for r in RATIOS]
     pts += [Point(MU_CHANNEL, r, s, p_ext=P_LOW) for s in (1, 2, 3) for r in NEAR_YIELD]
     pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in NEAR_YIELD_LARGE]
     pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in (1, 2, 3) for r in NEAR_YIELD]
+    pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in BELOW_YIELD_LARGE]
     return _plan("full", pts, stint=20_000,
                  max_shear_steps={2000: 1_000_000, 10_000: 400_000})
 

@@ -428,19 +428,27 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
 
 
 def _near_yield(points: pl.DataFrame, law: Any) -> str:
-    """What the cell did near yield, in words, from the runs."""
+    """What the cell did near yield, per cell size, in words, from the runs."""
     d = points.filter(pl.col("tau_ratio") < 0.42)
-    by = d.group_by("tau_ratio").agg(
+    steady = (pl.col("state") == "flowing") & pl.col("converged")
+    by = d.group_by("N", "tau_ratio").agg(
         pl.len().alias("runs"), (pl.col("state") == "arrested").sum().alias("arrested"),
-        ((pl.col("state") == "flowing") & pl.col("converged")).sum().alias("steady"),
-        pl.col("N").max().alias("N_max")).sort("tau_ratio")
-    parts = [f"tau/p = {r['tau_ratio']:g}: {r['steady']} of {r['runs']} runs steady, "
-             f"{r['arrested']} arrested" for r in by.iter_rows(named=True)]
+        steady.sum().alias("steady")).sort("N", "tau_ratio")
+    if not by.height:
+        return "No ratio below tau/p = 0.42 was run (this plan does not probe yield)."
+    slowest = points.filter(steady).group_by("N").agg(pl.col("I_g").min()).sort("N")
+    sizes = []
+    for n in sorted(set(by["N"].to_list())):
+        parts = [f"{r['tau_ratio']:g}: {r['steady']}/{r['runs']} steady, {r['arrested']} "
+                 "arrested" for r in by.filter(pl.col("N") == n).iter_rows(named=True)]
+        sizes.append(f"N = {n:,}, tau/p = " + "; ".join(parts))
     gap = float(law.mu(1e-3) - law.mu_s)
-    return ("Near yield the stress-controlled cell arrests or flows at I of a few 1e-2: "
-            + "; ".join(parts) + f" (both pressures, N = 2000 and 10,000). On the fitted law, "
-            f"I = 1e-3 needs mu within {gap:.4f} of mu_s: a steady flow that slow is out of "
-            "reach of a stress-controlled cell of this size (it arrests first).")
+    return ("Near yield (both pressures): " + ". ".join(sizes) + ". The slowest steady flow: "
+            + ", ".join(f"I = {r['I_g']:.3g} at N = {r['N']:,}"
+                        for r in slowest.iter_rows(named=True))
+            + f": a larger cell holds a steady flow closer to yield. On the fitted law, I = "
+            f"1e-3 needs mu within {gap:.4f} of mu_s, below what a stress-controlled cell of "
+            "these sizes holds (it arrests first).")
 
 
 def _float(v: Any) -> float:
