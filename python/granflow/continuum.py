@@ -50,6 +50,7 @@ __all__ = [
     "solve_local",
     "solve_nonlocal",
     "prediction_band",
+    "plug_half_width",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -342,21 +343,8 @@ class Profile:
         return float(self.u[-1])
 
     def plug_half_width(self, I_plug: float = 1e-4) -> float:
-        """Half-width of the central plug: ``W/2`` minus the largest ``x`` with
-        ``I >= I_plug`` (the crossing interpolated linearly between grid points).
-
-        ``W/2 - x0`` when ``I < I_plug`` everywhere, 0 when ``I >= I_plug`` at the centre.
-        """
-        x, i = self.x, self.I
-        above = np.nonzero(i >= I_plug)[0]
-        if above.size == 0:
-            return float(x[-1] - x[0])
-        k = int(above[-1])
-        if k == len(x) - 1:
-            return 0.0
-        # I crosses I_plug between x[k] (>=) and x[k+1] (<)
-        t = (i[k] - I_plug) / (i[k] - i[k + 1])
-        return float(x[-1] - (x[k] + t * (x[k + 1] - x[k])))
+        """Half-width of the central plug (:func:`plug_half_width` on this profile)."""
+        return plug_half_width(self.x, self.I, I_plug)
 
     def at(self, xs: npt.ArrayLike) -> dict[str, FloatArray]:
         """The quantities of :data:`PROFILE_FIELDS`, interpolated linearly at ``xs`` (which
@@ -381,6 +369,31 @@ class Profile:
             parts.append((m[:-1, None] + np.diff(m)[:, None] * np.arange(4) / 4.0).ravel())
         xf = np.unique(np.clip(np.concatenate(parts), lo, hi))
         return float(trapezoid(self.evaluate(xf)["phi"], xf))
+
+
+def plug_half_width(x: npt.ArrayLike, I: npt.ArrayLike, I_plug: float = 1e-4) -> float:  # noqa: E741
+    """Half-width of the central plug of a half profile ``I(x)`` (``x`` from the wall to the
+    centre line at ``x[-1]``): ``x[-1]`` minus the largest ``x`` with ``I >= I_plug`` (the
+    crossing interpolated linearly between points); ``x[-1] - x[0]`` when ``I < I_plug``
+    everywhere, 0 when ``I >= I_plug`` at the centre. Binned DEM profiles take it too, so
+    that a model and the DEM are judged alike."""
+    xx, i = np.asarray(x, dtype=np.float64), np.asarray(I, dtype=np.float64)
+    above = np.nonzero(i >= I_plug)[0]
+    if above.size == 0:
+        return float(xx[-1] - xx[0])
+    k = int(above[-1])
+    if k == len(xx) - 1:
+        return 0.0
+    # I crosses I_plug between x[k] (>=) and x[k+1] (<)
+    t = (i[k] - I_plug) / (i[k] - i[k + 1])
+    return float(xx[-1] - (xx[k] + t * (xx[k + 1] - xx[k])))
+
+
+def _g_loc(law: LocalLaw, mu: FloatArray, c: float) -> FloatArray:
+    """Henann & Kamrin's local fluidity ``g_loc = I_of_mu(mu) sqrt(P/rho_p)/(d mu)`` (``c =
+    sqrt(P/rho_p)/d``): ``|du/dx|/mu`` of the local law, 0 in the plug."""
+    i = law.I_of_mu(mu)
+    return np.divide(c * i, mu, out=np.zeros_like(i), where=i > 0)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -455,9 +468,7 @@ def _local_profile(law: LocalLaw, prob: ChannelProblem, n: int) -> Profile:
             u[sheared] = prob.u_wall + u_edge_rel + y[1]
         mu = s / sxx
         i = law.I_of_mu(mu)
-        dudx = c * i
-        fl = np.divide(dudx, mu, out=np.zeros_like(dudx), where=dudx > 0)
-        return _quantities(law, u, s, mu, i, dudx, fl)
+        return _quantities(law, u, s, mu, i, c * i, _g_loc(law, mu, c))
 
     x = np.linspace(x0, xc, int(n))
     q = evaluate(x)
@@ -507,16 +518,14 @@ class _Nonlocal:
     """
 
     def __init__(self, law: LocalLaw, A: float, prob: ChannelProblem) -> None:
-        self.law, self.A, self.prob = law, A, prob
+        self.law, self.prob = law, prob
         self.rg = prob.rho_p * prob.g
         self.sxx = prob.sigma_xx
         self.c = prob.shear_rate_scale
         self.k = 1.0 / (A * prob.d)
 
     def g_loc(self, mu: FloatArray) -> FloatArray:
-        """``I_of_mu(mu) sqrt(P/rho_p) / (d mu)`` for ``mu > mu_s``, else 0."""
-        i = self.law.I_of_mu(mu)
-        return np.divide(self.c * i, mu, out=np.zeros_like(i), where=i > 0)
+        return _g_loc(self.law, mu, self.c)
 
     def f(self, y: FloatArray) -> FloatArray:
         law = self.law

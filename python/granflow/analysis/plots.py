@@ -25,14 +25,17 @@ from .stats import SEvsTime, quiet
 from .tables import TableLike, to_polars
 
 PathLike = str | os.PathLike[str]
-_ZONE_COLOURS = {"plug": "tab:gray", "dense": "tab:brown", "loose": "black", "wall": "tab:red"}
+#: a colour per channel zone (analysis.channel.zones), shared by the reports
+ZONE_COLOURS = {"plug": "tab:gray", "dense": "tab:brown", "loose": "black", "wall": "tab:red"}
 
 
-def _save(fig: Figure, path: PathLike) -> Path:
+def save_figure(fig: Figure, path: PathLike, dpi: int = 110) -> Path:
+    """Lay out ``fig`` and write it to ``path`` as PNG (its folder made if missing)."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(p, dpi=110, format="png")
+    with np.errstate(under="ignore"):  # log axes spanning many decades
+        fig.tight_layout()
+        fig.savefig(p, dpi=dpi, format="png")
     return p
 
 
@@ -99,7 +102,7 @@ def plot_channel_velocity(
     for a in (a1, a2):
         if a.get_legend_handles_labels()[0]:
             a.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 @quiet
@@ -151,7 +154,7 @@ def plot_channel_fields(
         a.set_yscale("log")
     if ax[0].get_legend_handles_labels()[0]:
         ax[0].legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 @quiet
@@ -176,7 +179,7 @@ def plot_channel_mu_phi_I(
                 k = int(np.argmax(inum))
                 anchor = (float(inum[k]), float(d["rcp_minus_phi"].to_numpy()[k]))
             imin, imax = min(imin, float(inum.min())), max(imax, float(inum.max()))
-            c = _ZONE_COLOURS[zone]
+            c = ZONE_COLOURS[zone]
             a1.errorbar(
                 inum,
                 d["mu"].to_numpy(),
@@ -214,7 +217,7 @@ def plot_channel_mu_phi_I(
     a2.set_ylabel("0.64 - phi")
     a1.legend(fontsize=7)
     a2.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # --------------------------------------------------------------------------------------------
@@ -296,7 +299,7 @@ def plot_cell_rheology(
         ax.set_ylabel(lab)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=6)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # --------------------------------------------------------------------------------------------
@@ -362,7 +365,7 @@ def plot_se_vs_time(
     handles = ax.get_legend_handles_labels()[0]
     if handles:
         ax.legend(fontsize=6 if len(handles) > 6 else 7, ncol=2 if len(handles) > 6 else 1)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 @quiet
@@ -387,7 +390,7 @@ def plot_work_precision(table: TableLike, path: PathLike) -> Path:
     ax.set_ylabel("|deviation|")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_run(directory: PathLike) -> list[Path]:

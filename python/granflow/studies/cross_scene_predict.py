@@ -26,6 +26,7 @@ from granflow.continuum import (
     ChannelProblem,
     LocalLaw,
     Profile,
+    plug_half_width,
     prediction_band,
     solve_local,
     solve_nonlocal,
@@ -245,20 +246,6 @@ def fit_amplitude(law: LocalLaw, case: ChannelCase, k: int = 0) -> float:
     return float(10**r.x)
 
 
-def plug_half_width(xi: FloatArray, inum: FloatArray, W: float) -> float:
-    """W/2 minus the outermost position where I crosses I_PLUG (log-linear between bin
-    centres); 0 when the centre bin shears, W/2 - xi[0] when no bin does."""
-    above = np.flatnonzero(inum >= I_PLUG)
-    if above.size == 0:
-        return float(W / 2 - xi[0])
-    j = int(above[-1])
-    if j == xi.size - 1:
-        return 0.0
-    lo, hi = np.log(max(inum[j], 1e-300)), np.log(max(inum[j + 1], 1e-300))
-    x = float(np.interp(np.log(I_PLUG), [hi, lo], [xi[j + 1], xi[j]]))
-    return float(W / 2 - x)
-
-
 def zone_misfits(case: ChannelCase, prof: Profile, model: str) -> list[dict[str, Any]]:
     """Per zone of the DEM profile: RMS misfit of u - u_slip (relative to u_max - u_slip),
     of log10 |du/dx| (each floored at 1e-6, the local plug's zero) and of phi; the wall
@@ -298,7 +285,7 @@ def local_law_residuals(case: ChannelCase, law: LocalLaw) -> pl.DataFrame:
 
 #: where the nonlocal model's boundary data may be taken: the wall bin (the report's
 #: predictions), and the first and second bins inside it (the wall zone's edge, 000's ~2 d)
-BOUNDARY_BINS = (0, 1, 2)
+BOUNDARY_BINS = (0, 1, 2)  # (0 first: the report's A and own amplitudes are its rows)
 
 
 def boundary_sensitivity(cal: Mapping[float, Calibration], cases: Sequence[ChannelCase],
@@ -374,7 +361,11 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
     cases = channel_cases(channel)
     ref = min(cases, key=lambda c: (abs(c.W - A_WIDTH), abs(c.phi_bar - A_PHI_BAR)))
     c_ref = law_for(ref, cal)
-    A = fit_amplitude(c_ref.law, ref)
+    # the amplitudes with the wall bin's data (bin 0): A on ref, and each run's own
+    boundary = boundary_sensitivity(cal, cases, ref)
+    own = {(r["W"], r["phi_bar"]): r for r in boundary.filter(pl.col("bin") == 0)
+           .iter_rows(named=True)}
+    A = float(boundary.filter(pl.col("bin") == 0)["A_ref"][0])
     a_draws = [fit_amplitude(law, ref) for law in c_ref.sample(max(3, n_band // 3), seed=1)]
     A_se = float(np.std(a_draws, ddof=1))
     log(f"nonlocal amplitude A = {A:.4g} ± {A_se:.2g} (fitted on {ref.name})")
@@ -384,12 +375,12 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
         t = case.profile
         xi = t["xi"].to_numpy()
         laws = c.sample(n_band, seed=2)
-        a_best = fit_amplitude(c.law, case)
+        a_best = float(own[(case.W, case.phi_bar)]["A_best"])
         row: dict[str, Any] = {
             "W": case.W, "phi_bar": case.phi_bar, "p_cal": c.p_ext,
             "sigma_xx_d_kn": case.pressure(), "mu_wall": float(t["mu"][0]),
             "A_best": a_best, "dem_du": float(t["u"][-1] - t["u"][0]),
-            "dem_plug": plug_half_width(xi, t["I"].to_numpy(), case.W),
+            "dem_plug": plug_half_width(xi, t["I"].to_numpy(), I_PLUG),
             "dem_delta_095": case.delta_095,
             "dem_mass": float(case.phi_bar * case.W / 2)}
         for model in ("local", "nonlocal"):
@@ -397,7 +388,7 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
             m = prof.at(xi)
             band, failed = _band(case, laws, model, A, xi)
             row.update({f"{model}_du": float(m["u"][-1] - m["u"][0]),
-                        f"{model}_plug": plug_half_width(xi, m["I"], case.W),
+                        f"{model}_plug": plug_half_width(xi, m["I"], I_PLUG),
                         # (a local plug that only slides has no delta_0.95)
                         f"{model}_delta_095": (delta_095_profile(xi, m)
                                                if m["u"][-1] > m["u"][0] else math.nan),
@@ -409,13 +400,11 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
                 "W": case.W, "phi_bar": case.phi_bar, "model": model, "xi": xi,
                 "du": m["u"] - m["u"][0], "dudx": m["dudx"], "phi": m["phi"], "I": m["I"],
                 **band}))
-        row["nonlocal_best_u_rel"] = _velocity_misfit(
-            case, solve_nonlocal(c.law, a_best, case.problem()))
+        row["nonlocal_best_u_rel"] = float(own[(case.W, case.phi_bar)]["u_rel_best"])
         rows.append(row)
         res.append(local_law_residuals(case, c.law))
         log(f"  {case.name}: local u_rel {row['local_u_rel']:.3f}, nonlocal "
             f"{row['nonlocal_u_rel']:.3f} (own best A = {a_best:.3g}: "
             f"{row['nonlocal_best_u_rel']:.3f})")
-    boundary = boundary_sensitivity(cal, cases, ref)
     return Prediction(cal, A, A_se, pl.DataFrame(rows), pl.DataFrame(zrows),
                       pl.concat(prows), pl.concat(res), boundary, time.perf_counter() - t0)

@@ -11,6 +11,9 @@ from typing import Any
 
 import numpy as np
 import polars as pl
+from matplotlib.figure import Figure
+
+from granflow.analysis.plots import ZONE_COLOURS, save_figure
 
 from ._campaign import md_table
 from .cross_scene_predict import (
@@ -28,22 +31,12 @@ MODELS = ("local", "nonlocal")
 COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}
 
 
-def _fig(path: Path) -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return plt
-
-
 def plot_width(pred: Prediction, W: float, phi_bar: float, dem: pl.DataFrame,
                path: Path) -> Path:
     """u - u_slip, |du/dx| (log) and phi across the half channel: the DEM with its SE bars,
     the local and the nonlocal prediction with their calibration bands (16-84 %)."""
-    plt = _fig(path)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    fig = Figure(figsize=(15, 4.2))
+    axes = fig.subplots(1, 3)
     xi = dem["xi"].to_numpy()
     cols = (("u", "du", "u - u_slip  [sqrt(g d)]"), ("gamma_dot", "dudx", "|du/dx|  [sqrt(g/d)]"),
             ("phi", "phi", "phi"))
@@ -76,24 +69,20 @@ def plot_width(pred: Prediction, W: float, phi_bar: float, dem: pl.DataFrame,
     axes[0].legend(fontsize=7)
     fig.suptitle(f"W = {W:g} d, phi_bar = {phi_bar:g}: DEM against the cell-calibrated models "
                  f"(A = {pred.A:.3g} fitted at W = {A_WIDTH:g})")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_law(pred: Prediction, path: Path) -> Path:
     """The cell's pooled points and fits, mu(I) and phi(I), with the DEM channel's bins
     (every steady run) coloured by zone."""
-    plt = _fig(path)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-    zc = {"plug": "tab:gray", "dense": "tab:green", "loose": "tab:orange", "wall": "tab:purple"}
+    fig = Figure(figsize=(12, 4.5))
+    axes = fig.subplots(1, 2)
     for z in ZONES:
         r = pred.residuals.filter(pl.col("zone") == z)
         for ax, col in zip(axes, ("mu", "phi"), strict=True):
-            ax.plot(r["I"].to_numpy(), r[col].to_numpy(), ".", color=zc[z], ms=4,
+            ax.plot(r["I"].to_numpy(), r[col].to_numpy(), ".", color=ZONE_COLOURS[z], ms=4,
                     label=f"channel DEM bins: {z}")
-    for (p, c), colour in zip(pred.cal.items(), ("black", "tab:red", "tab:blue"),
+    for (p, c), colour in zip(pred.cal.items(), ("tab:blue", "tab:purple", "tab:green"),
                               strict=False):
         d = c.points
         ii = np.logspace(-5, math.log10(c.law.I_max), 200)
@@ -110,10 +99,7 @@ def plot_law(pred: Prediction, path: Path) -> Path:
     axes[0].legend(fontsize=7)
     fig.suptitle("the cell's law (channel variables) and the channel's bins; dotted: the "
                  "lowest steady I the cell reached")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _zone_table(z: pl.DataFrame) -> pl.DataFrame:

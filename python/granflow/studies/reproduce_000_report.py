@@ -13,6 +13,7 @@ import numpy as np
 import polars as pl
 
 from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, scaled_profile_31
+from granflow.analysis.plots import save_figure
 
 from ._campaign import dask_recipe, md_table, pm
 
@@ -184,7 +185,7 @@ def plot_fig13(profiles: pl.DataFrame, path: Path) -> Path:
         ax.set_ylabel(name)
         ax.set_title(f"fig. 13: {col}")
         ax.legend(fontsize=6)
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=100)
 
 
 # --------------------------------------------------------------------------------------------
@@ -274,14 +275,6 @@ def stiffness_verdict(tab: pl.DataFrame) -> list[str]:
 # --------------------------------------------------------------------------------------------
 # figures
 # --------------------------------------------------------------------------------------------
-def _save(fig: Any, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with np.errstate(under="ignore"):  # log axes spanning many decades (T: 5 in 000)
-        fig.tight_layout()
-        fig.savefig(path, dpi=100)
-    return path
-
-
 def _lbl(r: dict[str, Any]) -> str:
     return f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}"
 
@@ -312,7 +305,7 @@ def plot_fig4(steady: pl.DataFrame, profiles: pl.DataFrame, path: Path) -> Path:
     b.set_title("fig. 4(b): scaled velocity")
     a.legend(fontsize=6)
     b.legend(fontsize=6)
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=100)
 
 
 def plot_fig5(steady: pl.DataFrame, path: Path) -> Path:
@@ -335,7 +328,7 @@ def plot_fig5(steady: pl.DataFrame, path: Path) -> Path:
         ax.set_ylabel(name)
         ax.set_title(f"fig. 5: {name}")
         ax.legend(fontsize=6)
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=100)
 
 
 def plot_fig7(steady: pl.DataFrame, path: Path) -> Path:
@@ -354,7 +347,7 @@ def plot_fig7(steady: pl.DataFrame, path: Path) -> Path:
         ax.set_ylabel(name)
         ax.set_title(f"fig. 7: {name}")
         ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=100)
 
 
 def plot_profiles(rows: pl.DataFrame, profiles: pl.DataFrame, path: Path, title: str,
@@ -396,7 +389,7 @@ def plot_profiles(rows: pl.DataFrame, profiles: pl.DataFrame, path: Path, title:
     axes[0].plot([], [], "r:", label="wall zone")
     axes[0].legend(fontsize=6)
     fig.suptitle(title, fontsize=9)
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=100)
 
 
 def plot_campaign_se(se: pl.DataFrame, path: Path) -> Path:
@@ -422,7 +415,7 @@ def plot_campaign_se(se: pl.DataFrame, path: Path) -> Path:
         ax.set_xlabel("steady averaging time T (√(d/g))")
         ax.set_ylabel(f"SE({col}) / {col}")
         ax.legend(fontsize=5)
-    return _save(fig, path)
+    return save_figure(fig, path, dpi=100)
 
 
 # --------------------------------------------------------------------------------------------
