@@ -473,10 +473,21 @@ class FitResult:
         return self.chi2 / self.dof if self.dof > 0 else math.nan
 
     @property
+    def scale(self) -> float:
+        """``max(1, red_chi2)`` (1 when undefined): the factor on the covariance where the
+        scatter exceeds the SEs."""
+        return max(1.0, self.red_chi2) if math.isfinite(self.red_chi2) else 1.0
+
+    @property
     def errors_scaled(self) -> dict[str, float]:
         """Errors multiplied by ``sqrt(max(1, red_chi2))``."""
-        f = math.sqrt(max(1.0, self.red_chi2)) if math.isfinite(self.red_chi2) else 1.0
+        f = math.sqrt(self.scale)
         return {k: v * f for k, v in self.errors.items()}
+
+    @property
+    def cov_scaled(self) -> FloatArray:
+        """The covariance multiplied by ``max(1, red_chi2)`` (the errors_scaled')."""
+        return np.asarray(self.cov * self.scale)
 
     @quiet
     def __call__(self, I: npt.ArrayLike) -> FloatArray:  # noqa: E741

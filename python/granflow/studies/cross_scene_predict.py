@@ -78,8 +78,7 @@ class Calibration:
     def covariances(self) -> tuple[FloatArray, FloatArray]:
         """The fits' covariances in the law's parameter order (LocalLaw.mu_covariance),
         scaled by max(1, red chi^2)."""
-        mu, phi = (f.cov * max(1.0, f.red_chi2 if math.isfinite(f.red_chi2) else 1.0)
-                   for f in (self.mu_fit, self.phi_fit))
+        mu, phi = self.mu_fit.cov_scaled, self.phi_fit.cov_scaled
         return LocalLaw.mu_covariance(mu, self.law.mu_form == "jop"), phi
 
     def sample(self, n: int, seed: int = 0) -> list[LocalLaw]:
@@ -142,7 +141,7 @@ def fits_table(cal: Mapping[float, Calibration]) -> pl.DataFrame:
                          "c0": f.params[k0], "c0_se": e[k0], "A": f.params[k1],
                          "A_se": e[k1], "a": f.params[k2], "a_se": e[k2],
                          "red_chi2": f.red_chi2, "n": f.n,
-                         "cov": [float(v) for v in (f.cov * max(1.0, f.red_chi2)).ravel()],
+                         "cov": [float(v) for v in f.cov_scaled.ravel()],
                          "I_min": c.law.I_min, "I_max": c.law.I_max})
     return pl.DataFrame(rows)
 

@@ -161,10 +161,15 @@ def quick_plan() -> Plan:
 # --------------------------------------------------------------------------------------------
 # one point
 # --------------------------------------------------------------------------------------------
-def _steady_series(series: pa.Table, t0: float) -> pl.DataFrame:
-    from granflow.analysis.rheology import gradient_frame
+def _steady_series(series: pa.Table, t0: float, observables: Iterable[str]) -> pl.DataFrame:
+    """The series after ``t0``, with the gradient-frame columns when ``observables`` ask for
+    them (rheology.gradient_frame)."""
+    from granflow.analysis.rheology import GRADIENT_COLUMNS, gradient_frame
+    from granflow.analysis.tables import to_polars
 
-    return gradient_frame(series).filter(pl.col("t") > t0)
+    wanted = set(GRADIENT_COLUMNS) & set(observables)
+    s = gradient_frame(series) if wanted else to_polars(series)
+    return s.filter(pl.col("t") > t0)
 
 
 def _analyse(s: pl.DataFrame, observables: Iterable[str] = OBSERVABLES) -> dict[str, Any]:
@@ -211,7 +216,7 @@ def point_row(point: Point, plan: Plan, series: pa.Table, shear0: float) -> dict
     """The row of a point from its series (the steady part after the shear switch at
     ``shear0``): state, mean / SE / correlation time of every observable, whether it met the
     plan's SE targets, and its SE rows under ``"se_rows"``."""
-    s = _steady_series(series, shear0)
+    s = _steady_series(series, shear0, plan.observables)
     row: dict[str, Any] = {**asdict(point), "state": "short", "converged": False}
     if s.height >= 200:
         row.update(_analyse(s, plan.observables))
