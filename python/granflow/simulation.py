@@ -197,7 +197,7 @@ class Simulation:
     def save_checkpoint(self, path: str | os.PathLike, scene: dict[str, Any] | None = None
                         ) -> None:
         """Write the complete state (particles, contact histories, step, time) atomically;
-        ``scene`` is a scene's record in the header (:func:`granflow.scenes._base.checkpoint_header`),
+        ``scene`` is a scene's record in the header (:func:`granflow.scenes.write_checkpoint`),
         kept beside what rebuilds the simulation."""
         head = self._rebuild_params()
         if scene is not None:

@@ -59,7 +59,8 @@ class SizeDist:
     def min(self) -> float:
         """The smallest diameter present (a discrete size with fraction 0 is absent)."""
         if self.kind == "discrete":
-            return min(d for d, f in zip(self.params[0::2], self.params[1::2]) if f > 0)
+            return min(d for d, f in zip(self.params[0::2], self.params[1::2], strict=True)
+                       if f > 0)
         return min(self.params)
 
     @property
@@ -69,8 +70,8 @@ class SizeDist:
             lo, hi = self.params
             return float(np.pi / 6 * (lo + hi) / 2 * (lo**2 + hi**2) / 2)  # <d^3> = that / (pi/6)
         if self.kind == "discrete":
-            return float(np.pi / 6 * sum(f * k**3 for k, f in zip(self.params[0::2],
-                                                                   self.params[1::2])))
+            mix = zip(self.params[0::2], self.params[1::2], strict=True)
+            return float(np.pi / 6 * sum(f * k**3 for k, f in mix))
         return float(np.pi / 6 * self.params[0] ** 3)
 
     def to_spec(self) -> Any:
@@ -80,7 +81,7 @@ class SizeDist:
             return self.params[0]
         if self.kind == "uniform":
             return list(self.params)
-        return {f"{d:g}": f for d, f in zip(self.params[0::2], self.params[1::2])}
+        return {str(d): f for d, f in zip(self.params[0::2], self.params[1::2], strict=True)}
 
 
 def mono(d: float = 1.0) -> SizeDist:

@@ -7,20 +7,25 @@ Preparation (paper fig. 2, "fill and release"): spheres are placed at random in 
 above a floor, poured under gravity and settled; then the floor is removed and y made periodic
 with period H. Protocol details that the paper leaves open, and our choices:
 
-* pouring is frictionless and uses min(kn, prep_kn = 1e4), e_n = ``POUR_E_N`` = 0.3, dt =
-  t_c/``POUR_DT_DIVISOR`` (t_c/20) for speed, from a random insertion at phi =
-  ``PHI_INSERT`` = 0.3; the bed is settled when the kinetic energy per particle is below ``settle_ke`` m g d; friction and
-  the run's stiffness, restitution and dt apply from the release on (all tangential histories
-  start at zero at the release);
-* the soft pour's overlaps are relaxed at the run's kn (``RELAX_ROUNDS`` x
-  ``RELAX_ROUND_STEPS`` = 1000 damped steps, velocities quenched) so that a stiff run does not start with stored elastic energy;
-  if the settled bed is taller than H (phi_bar close to the packing fraction) it is compressed
-  affinely into [0, H) and relaxed without gravity before the release; if that relaxation
-  leaves overlaps >= 0.01 d the packing cannot hold phi_bar (the densest bed depends on the
-  channel's size: the pour packs to ~0.57-0.59 up to its rough top in channels 8-10 d wide,
-  ~0.61 at W = 20 d; squeezed to 0.63 the bed keeps overlaps of 0.017-0.019 d at W = 8-10 d,
-  0.008 d at W = 20 d)
-  and ``prepare`` refuses phi_bar (docs/channel.md, "Input checks");
+* pour (``_pour``): from a random insertion at phi = ``PHI_INSERT`` = 0.3, frictionless, with
+  min(kn, prep_kn = 1e4), e_n = ``POUR_E_N`` = 0.3, dt = t_c/``POUR_DT_DIVISOR`` = t_c/20 for
+  speed; the bed is settled when the kinetic energy per particle is below ``settle_ke`` m g d
+  (checked every ``SETTLE_CHECK_TIME``, giving up after ``SETTLE_T_BASE`` + ``SETTLE_T_FALLS``
+  t_fall = 40 + 4 t_fall); friction and the run's stiffness, restitution and dt apply from the
+  release on (all tangential histories start at zero at the release);
+* relax (``_relax``): the soft pour's overlaps are relaxed at the run's kn (``RELAX_ROUNDS`` x
+  ``RELAX_ROUND_STEPS`` = 1000 damped steps, velocities quenched) so that a stiff run does not
+  start with stored elastic energy;
+* squeeze (``_squeeze``): if the settled bed is taller than H (phi_bar close to the packing
+  fraction) it is compressed affinely into [0, H) (its top ``SQUEEZE_TOP_MARGIN`` d_max below
+  H) and relaxed without gravity (at most ``SQUEEZE_ROUNDS`` x ``SQUEEZE_ROUND_STEPS`` steps)
+  before the release; if that relaxation leaves overlaps >= ``PREP_MAX_OVERLAP`` = 0.01 d the
+  packing cannot hold phi_bar (the densest bed depends on the channel's size: the pour packs to
+  ~0.57-0.59 up to its rough top in channels 8-10 d wide, ~0.61 at W = 20 d; squeezed to 0.63
+  the bed keeps overlaps of 0.017-0.019 d at W = 8-10 d, 0.008 d at W = 20 d) and ``prepare``
+  refuses phi_bar (docs/channel.md, "Input checks");
+* release (``_release``): the floor goes, y becomes periodic with period H, the run's law and
+  dt apply;
 * the achieved phi_bar is exact: (total particle volume) / (W H B) with whole particles.
 
 Statistics (000 eqs 2.1–2.5) are taken inside the kernel's step loop (``granflow._core``
@@ -53,7 +58,6 @@ from granflow.sizes import SizeDist
 
 from ._base import (
     SampleTables,
-    check_keys,
     check_run_keys,
     material_overrides,
     read_checkpoint_state,
