@@ -1,9 +1,12 @@
 """Vertical channel (000): preparation, statistics, balances, bad input. Small channels."""
 
+import json
+
 import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
+from granflow import _core
 from granflow.scenes.channel import Channel
 from reference_samplers import cap_volume_below
 
@@ -127,8 +130,6 @@ def test_channel_checkpoint_restart_is_bitwise(tmp_path):
     assert np.array_equal(a.core.angular_velocities(), b.core.angular_velocities())
     assert b.prep_info == a.prep_info and b.achieved_phi_bar == a.achieved_phi_bar
     # one checkpoint header for every scene: the scene, its parameters, its state
-    from granflow import _core
-    import json
     head = json.loads(_core.read_checkpoint_header(str(tmp_path / "c.gfck"))[1])["scene"]
     assert head["scene"] == "channel" and head["state"] == a.prep_info
     assert head["parameters"]["n"] == a.prep_info["n"] and head["parameters"]["mu"] is None
