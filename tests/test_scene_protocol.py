@@ -162,3 +162,10 @@ def test_simulation_run_writes_its_checkpoint_at_the_end(gas, make_sim, tmp_path
     assert r.step == 30 and np.array_equal(r.get_positions(), s.get_positions())
     with pytest.raises(gf.ParameterError, match="checkpoint_every"):
         s.run(10, progress=False, checkpoint_every=5)
+
+
+def test_the_scenes_with_an_error_report_are_the_reports_table():
+    from granflow.analysis.report import REPORTS
+    from granflow.scenes import SCENES
+
+    assert {name for name, cls in SCENES.items() if cls.error_report} == set(REPORTS)

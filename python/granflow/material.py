@@ -32,7 +32,7 @@ import numpy as np
 from granflow import _core
 from granflow.errors import ParameterError
 from granflow.simulation import ContactLaw
-from granflow.sizes import SizeDist, as_size_dist, discrete, uniform
+from granflow.sizes import CHANNEL_MIX, SizeDist, as_size_dist, uniform
 
 #: How 002's contact time is read (``tc_reading``, docs/cell.md).
 TC_READINGS = ("collision", "printed")
@@ -204,7 +204,8 @@ class Material:
                           xi_t_ratio=self.xi_t_ratio, mu=self.mu, form=self.form, **damping)
 
     # -- contact time and time step --------------------------------------------------------
-    def _mean_mass(self, diameters: np.ndarray | None) -> float:
+    def mean_mass(self, diameters: np.ndarray | None = None) -> float:
+        """The mean particle mass of ``diameters`` (of the size distribution when None)."""
         if diameters is None:
             return float(self.density * self.sizes.mean_volume)
         d = np.asarray(diameters, dtype=float)
@@ -235,7 +236,7 @@ class Material:
             m_min = self.density * np.pi / 6.0 * d_min**3
             return float(_core.contact_time(self.law(diameters).as_dict(), 0.5 * m_min))
         kn = self.kn_value
-        m_e = self._mean_mass(diameters) / 2
+        m_e = self.mean_mass(diameters) / 2
         if self.gamma_n_tc is not None and reading == "printed":
             # 002's formula as printed, by fixed point (t_c and gamma_n = gamma_n_tc / t_c)
             tc = np.pi / np.sqrt(2 * kn / m_e)
@@ -274,7 +275,7 @@ class Material:
 #: 000's material (the channel): the mix 30 % 0.9 d, 40 % 1.0 d, 30 % 1.1 d, the kernel's law
 #: defaults (kn = 1e6 m g/d, k_t = 2/7 kn, e_n = 0.82, xi_t = xi_n/2, mu = 0.5), dt = 1.2e-4
 #: sqrt(d/g) at kn = 1e6, scaled as t_c.
-MATERIAL_000 = Material(sizes=discrete({0.9: 0.3, 1.0: 0.4, 1.1: 0.3}),
+MATERIAL_000 = Material(sizes=CHANNEL_MIX,
                         dt_rule=DtRule.kn_scaled(1.2e-4, 1e6))
 
 #: 002's material (the cell): diameters uniform in [0.9, 1.1] a, kn = kt = 1 (the stress unit),

@@ -50,6 +50,7 @@ from granflow import _core
 from granflow.errors import ConfigurationError, DilationError, InstabilityError, ParameterError
 from granflow.material import MATERIAL_002, Material
 from granflow.simulation import run_chunked
+from granflow.states import FlowState
 
 from ._base import (
     SampleTables,
@@ -163,7 +164,7 @@ class ShearCell:
         self._vs = vs = float(np.sum(np.pi * d**3 / 6))
         self._length = float((vs / self.phi0) ** (1 / 3))
         self.a = float(np.mean(d))
-        m_mean = float(np.mean(mat.density * np.pi * d**3 / 6))
+        m_mean = mat.mean_mass(d)
         self.t_c = mat.contact_time("mean", d)
         omega_g = self.omega_g_factor * np.sqrt(mat.kn_value / m_mean)
         self.w_g = float(len(d) * mat.kn_value * self.a**2 / omega_g**2)
@@ -353,7 +354,7 @@ class ShearCell:
         except Exception as exc:  # too little data: say so
             out["analysis_error"] = f"{type(exc).__name__}: {exc}"
             return out
-        out["state"] = getattr(res.state, "state", str(res.state))
+        out["state"] = FlowState(getattr(res.state, "state", str(res.state)))
         st = res.stats
         for k in ("mu1", "mu2", "mu3", "phi", "I", "p", "shear_rate", "beta", "N0_tau",
                   "N1_tau", "Z2", "theta_c"):

@@ -55,6 +55,7 @@ from granflow.errors import ConfigurationError, ParameterError
 from granflow.material import MATERIAL_000, Material, kernel_default_skin
 from granflow.simulation import Box, ContactLaw, Simulation, Wall, run_chunked
 from granflow.sizes import SizeDist
+from granflow.states import FlowState
 
 from ._base import (
     SampleTables,
@@ -574,7 +575,7 @@ class Channel:
                                "phi_bar_achieved": self.prep_info.get("phi_bar_achieved")}
         if "series" in t:
             fs = flow_state(t["series"])
-            out["state"] = fs.state
+            out["state"] = FlowState(fs.state)
         if "bins" not in t or t["bins"].num_rows == 0:
             return out
         try:
