@@ -164,7 +164,9 @@ class Material:
         ``gamma_n_tc`` is given too (a restitution replaces the rate damping)."""
         names = {f.name for f in dataclasses.fields(self)}
         for k in changes:
-            _need(k in names, "material key", k, f"one of {sorted(names)}")
+            if k not in names:
+                raise ParameterError(f"invalid {k}: not a material field: allowed one of "
+                                     f"{sorted(names)}")
         if "sizes" in changes:
             changes["sizes"] = as_size_dist(changes["sizes"])
         if changes.get("e_n") is not None and "gamma_n_tc" not in changes:
