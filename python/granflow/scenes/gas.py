@@ -171,11 +171,13 @@ class PeriodicGas:
     def summary(self) -> dict[str, Any]:
         """``n``, ``steps`` and the translational kinetic energy's mean and last value."""
         t = self.tables().get("series")
+        out: dict[str, Any] = {"n": None if self._sim is None else self._sim.n}
         if t is None or self._sim is None:
-            return {}
+            return out
         ke = t["ke_trans"].to_numpy()
-        return {"n": self._sim.n, "steps": self._sim.step, "ke_trans_mean": float(ke.mean()),
-                "ke_trans_last": float(ke[-1])}
+        out.update(steps=self._sim.step, ke_trans_mean=float(ke.mean()),
+                   ke_trans_last=float(ke[-1]))
+        return out
 
     def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
         """The kernel state (:func:`write_checkpoint`)."""
