@@ -50,8 +50,9 @@ else:
         from granflow.scenes.cell import ShearCell
     except ImportError:
         from granflow.cell import ShearCell
-    cell = ShearCell(N=2000, seed=1, threads=threads)
-    core = cell.sim
+    cell = ShearCell(N=2000, seed=1, threads=threads, start="dilute")
+    cell.prepare()  # (the dilute start: builds the kernel, runs nothing)
+    core = cell.core
     core.run(150_000)
     n = core.n
 t0 = time.perf_counter()

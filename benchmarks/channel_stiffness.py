@@ -78,7 +78,7 @@ def run_one(src: Channel, kn: float, a: argparse.Namespace, out: Path,
         done += c
         last = ch._tables.last("series")  # the last sample (not the whole table every chunk)
         vy = last["vcm_y"] if last else float("nan")
-        print(f"  kn = {kn:.0e}  t = {ch.sim.time:6.1f}  vcm_y = {vy:8.4f}  "
+        print(f"  kn = {kn:.0e}  t = {ch.core.time:6.1f}  vcm_y = {vy:8.4f}  "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0

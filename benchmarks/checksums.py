@@ -5,9 +5,9 @@
 1. Step bench: ``cargo bench --bench step -- FILE 3000 T`` on the flowing channel state of
    ``benchmarks/kernel_state.py`` (6754 particles), on 1 and 2 threads and with
    ``GRANFLOW_NO_AVX2=1``; it prints ``checksum (x + v by id)``.
-2. Cell: a stress-controlled cell, ``ShearCell(N=1000, seed=1, tc_reading="printed")`` (the
-   reading the checksum was first taken with; the other parameters at their defaults:
-   mu_s = 0.3, p_ext = 1e-4, tau_ext/p_ext = 0.5, dilute start), 3000 steps
+2. Cell: a stress-controlled cell, ``ShearCell(N=1000, seed=1, tc_reading="printed",
+   start="dilute")`` prepared (the reading the checksum was first taken with; the other
+   parameters at their defaults: mu = 0.3, p_ext = 1e-4, tau_ext/p_ext = 0.5), 3000 steps
    of the kernel; the checksum is sum |x| + 1e3 sum |v| + sum |w|, on 1 and 2 threads and
    with ``GRANFLOW_NO_AVX2=1``.
 
@@ -29,7 +29,8 @@ SETTINGS = [("1 thread", 1, False), ("2 threads", 2, False), ("1 thread, no AVX2
 CELL_SNIPPET = """
 import numpy as np
 from granflow.scenes.cell import ShearCell
-c = ShearCell(N=1000, seed=1, tc_reading="printed", threads={threads})
+c = ShearCell(N=1000, seed=1, tc_reading="printed", start="dilute", threads={threads})
+c.prepare()
 s = c.core
 s.run(3000)
 x, v, w = (np.asarray(a) for a in (s.positions(), s.velocities(), s.angular_velocities()))

@@ -36,6 +36,7 @@ import granflow as gf
 import numpy as np
 from granflow.analysis.stats import mean_se
 from granflow.io import _jsonable, write_lammps_data
+from granflow.material import kernel_default_skin
 from granflow.packing import dense_periodic_packing
 from granflow.scenes.channel import Channel
 
@@ -77,10 +78,10 @@ def channel_state(flow_steps: int = FLOW_STEPS, seed: int = 1, threads: int = 1)
         ch = Channel(W=W, H=H, B=B, phi_bar=PHI_BAR, kn=KN, e_n=E_N, mu=MU, dt=DT, skin=SKIN,
                      density=DENSITY, seed=seed, threads=threads)
         ch.prepare(progress=False)
-        ch.sim.run(flow_steps, progress=False)
-        s = ch.sim
-        np.savez(f, x=s.get_positions(), v=s.get_velocities(), omega=s.get_angular_velocities(),
-                 d=s.core.diameters(), W=W, H=H, B=B, flow_steps=flow_steps, seed=seed)
+        s = ch.core
+        s.run(flow_steps)
+        np.savez(f, x=s.positions(), v=s.velocities(), omega=s.angular_velocities(),
+                 d=s.diameters(), W=W, H=H, B=B, flow_steps=flow_steps, seed=seed)
         print(f"  prepared the flowing channel (N = {s.n}, t_flow = {flow_steps * DT:g}) in "
               f"{time.perf_counter() - t0:.0f} s -> {f}")
     z = np.load(f)
@@ -506,12 +507,12 @@ def part_shear(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
     from granflow.scenes.cell import ShearCell
 
     n, steps = a.cell_n, a.cell_steps
-    cell = ShearCell(N=n, mu_s=0.3, p_ext=1e-4, tau_ratio=0.5, seed=1, threads=1)
+    cell = ShearCell(N=n, mu=0.3, p_ext=1e-4, tau_ratio=0.5, seed=1, threads=1)
     t0 = time.perf_counter()
     cell.run(steps, progress=False)
     t_prep = time.perf_counter() - t0
     # granflow's speed on this workload: a timed stretch of the steady flow
-    core = cell.sim
+    core = cell.core
     t0 = time.perf_counter()
     core.run(a.shear_steps)
     gf_rate = core.n * a.shear_steps / (time.perf_counter() - t0)
@@ -539,9 +540,11 @@ def part_shear(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
     st = lp.state_from_arrays(box["x"], d, np.zeros(3), box["hi"], density=1.0, v=box["v"],
                               omega=core.angular_velocities(), tilt=box["tilt"])
     phi_now = float(np.sum(np.pi / 6 * d**3) / abs(np.linalg.det(h)))
-    gamma_n = 0.5 / cell.t_c  # the cell's law: kn = kt, xi_n = 0.5/t_c, xi_t = xi_n/2, mu_s
-    params = {"kn": cell.kn, "kt": cell.kn, "gamma_n": gamma_n, "gamma_t": 0.5 * gamma_n,
-              "mu": cell.mu_s, "dt": core.dt, "skin": cell.skin, "shear_rate": rate,
+    gamma_n = 0.5 / cell.t_c  # the cell's law: kn = kt, xi_n = 0.5/t_c, xi_t = xi_n/2, mu
+    kn = cell.mat.kn_value
+    params = {"kn": kn, "kt": kn, "gamma_n": gamma_n, "gamma_t": 0.5 * gamma_n,
+              "mu": cell.mat.mu_value, "dt": core.dt, "skin": kernel_default_skin(),
+              "shear_rate": rate,
               "add_streaming": True, "thermo_every": a.shear_steps}
     every = max(1, a.shear_steps // 100)
     params["extra"] = [

@@ -60,7 +60,7 @@ def main() -> None:
     rows.append(report("channel (walls, gravity)", ch.core, a.steps))
     cell = ShearCell(N=6000, p_ext=1e-4, tau_ratio=0.5, seed=1, threads=a.threads)
     cell.run(20_000)
-    rows.append(report("stress-controlled cell (compacting)", cell.sim, a.steps))
+    rows.append(report("stress-controlled cell (compacting)", cell.core, a.steps))
     OUT.mkdir(exist_ok=True)
     (OUT / "components.json").write_text(json.dumps(rows, indent=1))
 

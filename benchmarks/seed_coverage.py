@@ -30,7 +30,7 @@ BAND = (0.7, 1.4)
 def run_seed(seed: int, n: int, tau: float, steps: int, path: str, threads: int = 1) -> str:
     from granflow.scenes.cell import ShearCell
 
-    c = ShearCell(N=n, mu_s=0.3, p_ext=1e-4, tau_ratio=tau, seed=seed, sample_every=200,
+    c = ShearCell(N=n, mu=0.3, p_ext=1e-4, tau_ratio=tau, seed=seed, sample_every=200,
                   threads=threads)
     c.prepare(progress=False)
     c.run(steps, progress=False)
@@ -64,7 +64,7 @@ def main() -> int:
 
     d = seed_coverage([pl.read_parquet(p) for p in paths if p.exists()], SHOWN)
     pl.Config.set_tbl_cols(10)
-    print(f"N = {a.N}, mu_s = 0.3, tau/p = {a.tau}, {a.steps} steps after the compaction, "
+    print(f"N = {a.N}, mu = 0.3, tau/p = {a.tau}, {a.steps} steps after the compaction, "
           f"{time.perf_counter() - t0:.0f} s")
     print(d)
     ok = True

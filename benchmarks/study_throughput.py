@@ -61,6 +61,7 @@ from typing import Any
 import granflow as gf
 import numpy as np
 from granflow.io import _jsonable
+from granflow.material import kernel_default_skin
 from granflow.scenes.cell import ShearCell
 from granflow.scenes.channel import Channel
 
@@ -77,7 +78,7 @@ KT = KN * 2.0 / 7.0
 E_N = 0.82
 MU = 0.5
 DT = 1.2e-4 * math.sqrt(1.0e6 / KN)  # the Channel default (for kn = 1e6) scaled to kn = 1e5
-SKIN = Channel.skin  # the Channel default (0.3), used by both codes
+SKIN = kernel_default_skin()  # the kernel's default, used by both codes
 SEED = 1
 FLOW_STEPS = 22_000  # t = 8.3, the flow time of compare_lammps's developed state
 # statistics intervals (None = none); a window (ave/chunk Nrepeat) spans WINDOW_STEPS steps
@@ -103,7 +104,8 @@ def _label(every: int | None) -> str:
 
 
 def make_channel(every: int | None, window: int, threads: int) -> Channel:
-    return Channel(W=W, H=H, B=B, phi_bar=0.6, kn=KN, kt=KT, e_n=E_N, mu=MU, dt=DT, skin=SKIN,
+    # k_t: the kernel's default 2/7 kn (one ulp from LAMMPS's KT = KN * 2 / 7 at kn = 1e5)
+    return Channel(W=W, H=H, B=B, phi_bar=0.6, kn=KN, e_n=E_N, mu=MU, dt=DT, skin=SKIN,
                    seed=SEED, bin_width=1.0, wall_bin=1.0, sample_every=every,
                    window=window, threads=threads)
 
@@ -118,10 +120,10 @@ def channel_state(flow_steps: int) -> State:
         ch = make_channel(100, 50, threads=2)
         ch.prepare(progress=False)
         t_prep = time.perf_counter() - t0
-        ch.core.run(flow_steps)
-        s = ch.sim
-        np.savez(f, x=s.get_positions(), v=s.get_velocities(), omega=s.get_angular_velocities(),
-                 d=s.core.diameters(), flow_steps=flow_steps, dt=DT, kn=KN, seed=SEED,
+        s = ch.core
+        s.run(flow_steps)
+        np.savez(f, x=s.positions(), v=s.velocities(), omega=s.angular_velocities(),
+                 d=s.diameters(), flow_steps=flow_steps, dt=DT, kn=KN, seed=SEED,
                  prep=json.dumps(ch.prep_info), contacts=s.diagnostics()["contacts"])
         print(f"  developed the channel (N = {s.n}, prepare {t_prep:.0f} s, then {flow_steps} "
               f"steps, t_flow = {flow_steps * DT:.3g}) in {time.perf_counter() - t0:.0f} s -> {f}")
@@ -139,8 +141,8 @@ def channel_scene(st: State, every: int | None, window: int, threads: int) -> Ch
     """A fresh Channel with the wanted sampling, started from the state ``st``."""
     sc = make_channel(every, window, threads)
     sc._release(np.array(st["x"]), np.array(st["d"]), dict(st["prep"]))
-    sc.sim.set_velocities(np.array(st["v"]))
-    sc.sim.set_angular_velocities(np.array(st["omega"]))
+    sc.core.set_velocities(np.ascontiguousarray(st["v"], dtype=np.float64))
+    sc.core.set_angular_velocities(np.ascontiguousarray(st["omega"], dtype=np.float64))
     return sc
 
 

@@ -22,7 +22,7 @@ from granflow.scenes.cell import ShearCell
 def one(args: tuple[str, int, int, float, int]) -> dict[str, object]:
     reading, seed, n, tau, steps = args
     t0 = time.perf_counter()
-    c = ShearCell(N=n, mu_s=0.3, p_ext=1e-4, tau_ratio=tau, sample_every=250, seed=seed,
+    c = ShearCell(N=n, mu=0.3, p_ext=1e-4, tau_ratio=tau, sample_every=250, seed=seed,
                   tc_reading=reading, threads=1)
     c.run(steps)
     s = c.summary()

@@ -1,6 +1,6 @@
-"""Stress-controlled cell (002) at mu_s = 0.3, p_ext = 1e-4: a sweep over tau_ext/p_ext, which
+"""Stress-controlled cell (002) at mu = 0.3, p_ext = 1e-4: a sweep over tau_ext/p_ext, which
 runs arrest and which flow, beta and d2/d1 in steady flow, and the measured (I, mu1, phi) beside
-the paper's curves for mu_s = 0.3. Resumable (finished runs are skipped).
+the paper's curves for mu = 0.3. Resumable (finished runs are skipped).
 
     python examples/cell_study.py OUT [--N 2000] [--ratios 0.3 0.4 0.5 0.6 0.7 0.8]
            [--steps 200000] [--workers 1]
@@ -29,7 +29,7 @@ def main() -> None:
     a = ap.parse_args()
     base = {
         "scene": "cell",
-        "params": {"N": a.N, "mu_s": a.mu, "p_ext": a.p, "sample_every": 250},
+        "params": {"N": a.N, "mu": a.mu, "p_ext": a.p, "sample_every": 250},
         "run": {"steps": a.steps, "checkpoint_every": a.steps // 4},
         "output": {},
     }

@@ -17,7 +17,7 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
+from granflow.material import MATERIAL_000
 from granflow.runner import execute
 
 
@@ -34,11 +34,12 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args()
-    dt = 1.2e-4 * np.sqrt(1e6 / a.kn)  # the paper's dt scaled with t_c ~ kn^-1/2
+    dt = MATERIAL_000.with_(kn=a.kn).dt()  # 000's rule: 1.2e-4 at kn = 1e6, scaled with t_c
+    assert dt is not None
     spec = {
         "scene": "channel",
         "seed": a.seed,
-        "params": {"W": a.W, "H": a.H, "B": a.B, "phi_bar": a.phi, "kn": a.kn, "dt": dt,
+        "params": {"W": a.W, "H": a.H, "B": a.B, "phi_bar": a.phi, "kn": a.kn,
                    "sample_every": 200, "window": 25},
         "run": {"steps": 0, "checkpoint_every": int(round(a.chunk_time / dt))},
         "output": {},
@@ -56,15 +57,15 @@ def main() -> None:
         t0 = time.perf_counter()
         r = execute(spec, out, progress=False, threads=a.threads)
         s = r.summary
-        print(f"t = {steps * dt:7.1f} sqrt(d/g)  state = {s.get('flow_state')}  "
+        print(f"t = {steps * dt:7.1f} sqrt(d/g)  state = {s.get('state')}  "
               f"u_slip = {s.get('u_slip', float('nan')):.4g} ± {s.get('u_slip_se') or 0:.2g}  "
               f"u_max = {s.get('u_max', float('nan')):.4g} ± {s.get('u_max_se') or 0:.2g}  "
               f"u_max/u_slip = {s.get('u_max_over_u_slip', float('nan')):.4g}  "
               f"({time.perf_counter() - t0:.0f} s, total {r.wall_seconds:.0f} s)", flush=True)
         u = s.get("u_max", float("nan"))
-        free_fall = s.get("flow_state") == "accelerating" and u > 1.2 * prev_u > 0
-        if steps * dt >= 3 * a.chunk_time and (s.get("flow_state") == "arrested" or free_fall):
-            print(f"flow {s['flow_state']}: stopping")
+        free_fall = s.get("state") == "accelerating" and u > 1.2 * prev_u > 0
+        if steps * dt >= 3 * a.chunk_time and (s.get("state") == "arrested" or free_fall):
+            print(f"flow {s['state']}: stopping")
             break
         prev_u = u
     try:

@@ -34,7 +34,7 @@ def main() -> None:
     last = bins.filter(pl.col("window") == bins["window"].max())
     print(last.select(["x", "phi", "u_y", "T", "sigma_xx", "sigma_xy", "Gamma"]))
     s = r.summary
-    print(f"flow state: {s.get('flow_state')}")
+    print(f"flow state: {s.get('state')}")
     for k in ("u_slip", "u_max", "delta_095", "u_max_over_u_slip", "sigma_xx_mean"):
         if k in s:
             print(f"  {k:18s} {s[k]:.4g} ± {s.get(k + '_se') or 0:.2g}")

@@ -200,7 +200,7 @@ class ChannelReference:
 def cell_observe(cell: Any) -> dict[str, float]:
     """The former ``ShearCell.observe()``: every cell observable of the current state."""
     self = cell
-    core = self.sim
+    core = self.core
     h = np.asarray(core.cell()[0])
     obs = dict(core.domain_observables())
     L = np.array([[obs[f"L_{a}{b}"] for b in AX] for a in AX])
@@ -232,7 +232,7 @@ def cell_observe(cell: Any) -> dict[str, float]:
     mu3 = float(np.sum(sp * DW)) / (8 * gd * gd * p) if ok else 0.0
     n0 = -3 * float(np.sum(sp * D2)) / (gd * sD) if ok else 0.0
     n1 = float(np.sum(sp * DW)) / (gd * sD) if ok else 0.0
-    I = gd * self.a / np.sqrt(p / self.density) if p > tiny else 0.0  # noqa: E741
+    I = gd * self.a / np.sqrt(p / self.mat.density) if p > tiny else 0.0  # noqa: E741
     # fabric (5.1): <n n> = I/3 + (2/15) A over contacts
     ids, dvec, _ = core.contacts()
     nc = len(ids)

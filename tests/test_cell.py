@@ -5,7 +5,9 @@ import numpy as np
 import polars as pl
 import pytest
 from granflow.analysis.stats import mean_se
-from granflow.scenes.cell import ShearCell, contact_time, contact_time_002, fabric
+from granflow.material import MATERIAL_002
+from granflow.scenes.cell import ShearCell, fabric
+from granflow.sizes import mono
 
 
 def _series(c):
@@ -14,13 +16,13 @@ def _series(c):
 
 @pytest.fixture(scope="module")
 def sheared():
-    c = ShearCell(N=300, mu_s=0.3, p_ext=1e-3, tau_ratio=0.5, sample_every=100, seed=3)
+    c = ShearCell(N=300, mu=0.3, p_ext=1e-3, tau_ratio=0.5, sample_every=100, seed=3)
     c.run(60_000)
     return c
 
 
 def test_tau_zero_compacts_isotropically_without_shear():
-    c = ShearCell(N=200, mu_s=0.3, p_ext=1e-3, tau_ratio=0.0, sample_every=100, seed=2)
+    c = ShearCell(N=200, mu=0.3, p_ext=1e-3, tau_ratio=0.0, sample_every=100, seed=2)
     c.run(30_000)
     s = _series(c)
     last = s.tail(50)
@@ -67,10 +69,21 @@ def test_fabric_of_hand_built_contacts():
 
 def test_scene_contains_only_what_it_needs():
     c = ShearCell(N=60, p_ext=1e-3, sample_every=10)
-    comps = c.sim.components()
+    with pytest.raises(gf.ConfigurationError, match="prepare"):
+        c.core  # noqa: B018  (built by prepare(), as every scene)
+    c.prepare()
+    comps = c.core.components()
     assert any("triclinic" in x for x in comps)
     assert not any("walls" in x or "gravity" in x for x in comps)
-    assert dict(c.sim.memory())["wall history"] == 0
+    assert dict(c.core.memory())["wall history"] == 0
+
+
+def test_n_is_the_count_that_N_volume_gives():
+    # N sets the solid volume (N mean particles); the count is reported as n
+    c = ShearCell(N=2000, seed=1)
+    assert c.n == 1996 and c.parameters()["n"] == 1996 and c.summary()["n"] == 1996
+    with pytest.raises(gf.ParameterError, match="solid volume"):
+        ShearCell(N=10)
 
 
 @pytest.mark.parametrize(
@@ -83,11 +96,14 @@ def test_scene_contains_only_what_it_needs():
         ({"e_n": 1.5}, "e_n"),
         ({"form": "walton"}, "form"),
         ({"tc_reading": "mass"}, "tc_reading"),
-        ({"size_mix": {0.9: 0.3, 1.0: 0.4, 1.1: 0.2}}, "size_mix"),
-        ({"size_mix": {}}, "size_mix"),
-        ({"size_mix": {-1.0: 1.0}}, "size_mix"),
-        ({"d_min": 1.2, "d_max": 1.1}, "d_min"),
-        ({"mu_s": -0.1}, "mu_s"),
+        ({"sizes": {0.9: 0.3, 1.0: 0.4, 1.1: 0.2}}, "sizes"),
+        ({"sizes": {}}, "sizes"),
+        ({"sizes": {-1.0: 1.0}}, "sizes"),
+        ({"sizes": [1.2, 1.1]}, "sizes"),
+        ({"sizes": "big"}, "sizes"),
+        ({"mu": -0.1}, "mu"),
+        ({"dt": 1.0}, "dt"),
+        ({"material": "001"}, "material"),
     ],
 )
 def test_bad_input(kw, name):
@@ -103,59 +119,67 @@ def test_cell_checkpoint_restart_is_bitwise(tmp_path):
     b = ShearCell(N=80, p_ext=1e-3, tau_ratio=0.5, sample_every=100, seed=5)
     b.restore(tmp_path / "c.gfck")
     b.run(1000)
-    assert np.array_equal(a.sim.positions(), b.sim.positions())
-    assert a.sim.cell() == b.sim.cell()
+    assert np.array_equal(a.core.positions(), b.core.positions())
+    assert a.core.cell() == b.core.cell()
 
 
 def test_contact_time_readings():
     # 002 prints t_c = pi (2 kn/m_e - g^2/4)^(-1/2) with g = 0.5/t_c; the force law's binary
     # collision lasts pi (kn/m_e - g^2/4)^(-1/2), and only then is e_n = exp(-g t_c/2) = exp(-1/4)
+    mat = MATERIAL_002.with_(sizes=mono(1.0))  # mean mass pi/6: m_e = pi/12
     kn, m_e = 1.0, np.pi / 12
-    tp = contact_time(kn, m_e, "printed")
-    assert tp == pytest.approx(contact_time_002(kn, m_e)[0], rel=1e-15)
+    tp = mat.contact_time("mean", reading="printed")
     g = 0.5 / tp
     assert tp == pytest.approx(np.pi / np.sqrt(2 * kn / m_e - g * g / 4), rel=1e-12)
-    tc = contact_time(kn, m_e, "collision")
+    tc = mat.contact_time("mean")
     g = 0.5 / tc
     assert tc == pytest.approx(np.pi / np.sqrt(kn / m_e - g * g / 4), rel=1e-12)
     assert tc / tp == pytest.approx(np.sqrt(2), rel=1e-12)
     # a given restitution: the damped half-period with the rate that gives it
     e = 0.6
-    t = contact_time(kn, m_e, "collision", e)
+    t = mat.with_(e_n=e).contact_time("mean")
     g = -2 * np.log(e) / t
     assert t == pytest.approx(np.pi / np.sqrt(kn / m_e - g * g / 4), rel=1e-12)
     # the default reading is the collision time; 002's printed one is sqrt(2) shorter
     b = ShearCell(N=60, p_ext=1e-3, sample_every=None)
-    m = b.sim.law()
-    assert b.t_c == contact_time(kn, float(np.mean(np.pi * b._d**3 / 6)) / 2, "collision")
+    b.prepare()
+    m = b.core.law()
+    assert b.t_c == MATERIAL_002.contact_time("mean", b._d)
     assert m["xi_n"] == 0.5 / b.t_c and m["kt"] == m["kn"]
-    assert b.sim.dt == pytest.approx(0.02 * b.t_c, rel=1e-15)
+    assert b.core.dt == pytest.approx(0.02 * b.t_c, rel=1e-15)
+    assert b.core.dt == MATERIAL_002.dt(b._d)
     c = ShearCell(N=60, p_ext=1e-3, sample_every=None, tc_reading="printed")
     assert b.t_c / c.t_c == pytest.approx(np.sqrt(2), rel=1e-12)
+    # the lightest pair is what the kernel reports
+    assert MATERIAL_002.contact_time("lightest", b._d) == pytest.approx(b.core.contact_time,
+                                                                       rel=1e-12)
+    # an absolute dt replaces the rule
+    assert ShearCell(N=60, sample_every=None, dt=0.01).timestep == 0.01
 
 
 def test_cell_takes_the_channels_material():
     # 000's mix by number, kt = 2/7 kn, a restitution, Hertz: all reach the kernel, and it flows
     mix = {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}
-    c = ShearCell(N=200, p_ext=1e-4, tau_ratio=0.5, sample_every=100, seed=1, size_mix=mix,
-                  kt_ratio=2 / 7, e_n=0.8, form="hertz", mu_s=0.5)
+    c = ShearCell(N=200, p_ext=1e-4, tau_ratio=0.5, sample_every=100, seed=1, sizes=mix,
+                  kt_ratio=2 / 7, e_n=0.8, form="hertz", mu=0.5)
+    c.prepare()
     d = np.round(c._d, 9)
     for size, frac in mix.items():
         assert abs(np.count_nonzero(d == size) - frac * len(d)) <= 1
-    law = c.sim.law()
+    law = c.core.law()
     assert law["kt"] == pytest.approx(2 / 7 * law["kn"]) and law["e_n"] == 0.8
     assert "xi_n" not in law
-    assert any("hertz" in x for x in c.sim.components())
+    assert any("hertz" in x for x in c.core.components())
     c.run(3000)
     s = _series(c)
     assert s["phi"].is_finite().all() and s["phi"][-1] > s["phi"][0]
     # TOML gives the mix's diameters as strings
-    t = ShearCell.from_spec({"N": 60, "p_ext": 1e-3, "size_mix": {"0.9": 0.5, "1.1": 0.5}})
+    t = ShearCell.from_spec({"N": 60, "p_ext": 1e-3, "sizes": {"0.9": 0.5, "1.1": 0.5}})
     assert sorted(set(np.round(t._d, 9))) == [0.9, 1.1]
 
 
 def test_compacted_start_compacts_unsheared_then_shears():
-    c = ShearCell(N=200, mu_s=0.3, p_ext=1e-3, tau_ratio=0.5, sample_every=100, seed=2)
+    c = ShearCell(N=200, mu=0.3, p_ext=1e-3, tau_ratio=0.5, sample_every=100, seed=2)
     c.prepare()
     t0 = c.shear_start_time
     assert t0 is not None and t0 > 0 and c.core.step > 0
@@ -176,11 +200,12 @@ def test_compacted_start_compacts_unsheared_then_shears():
 
 
 def test_set_stress_checks_its_values_and_its_domain():
-    c = ShearCell(N=60, p_ext=1e-3, sample_every=None)
+    c = ShearCell(N=60, p_ext=1e-3, sample_every=None, start="dilute")
+    c.prepare()
     with pytest.raises(gf.ParameterError, match="tau_ext/p_ext"):
-        c.sim.set_stress(1e-3, 2.5e-3)
+        c.core.set_stress(1e-3, 2.5e-3)
     with pytest.raises(gf.ParameterError, match="p_ext"):
-        c.sim.set_stress(0.0, 0.0)
+        c.core.set_stress(0.0, 0.0)
     gas = gf.scenes.PeriodicGas(L=6.0, seed=1)
     gas.prepare()
     with pytest.raises(gf.ParameterError, match="stress-controlled"):

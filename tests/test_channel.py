@@ -1,9 +1,12 @@
 """Vertical channel (000): preparation, statistics, balances, bad input. Small channels."""
 
+import json
+
 import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
+from granflow import _core
 from granflow.scenes.channel import Channel
 from reference_samplers import cap_volume_below
 
@@ -29,7 +32,7 @@ def test_preparation_hits_phi_bar(flowing):
 
 
 def test_scene_contains_only_what_it_needs(flowing):
-    comps = flowing.sim.components()
+    comps = flowing.core.components()
     assert "walls: 2 planes" in comps and any("gravity" in c for c in comps)
     assert not any(w in c.lower() for c in comps for w in ("triclinic", "barostat", "parrinello"))
 
@@ -126,3 +129,8 @@ def test_channel_checkpoint_restart_is_bitwise(tmp_path):
     assert np.array_equal(a.core.positions(), b.core.positions())
     assert np.array_equal(a.core.angular_velocities(), b.core.angular_velocities())
     assert b.prep_info == a.prep_info and b.achieved_phi_bar == a.achieved_phi_bar
+    # one checkpoint header for every scene: the scene, its parameters, its state
+    head = json.loads(_core.read_checkpoint_header(str(tmp_path / "c.gfck"))[1])["scene"]
+    assert head["scene"] == "channel" and head["state"] == a.prep_info
+    assert head["parameters"]["n"] == a.prep_info["n"] and head["parameters"]["mu"] is None
+    assert not (tmp_path / "c.gfck.prep.json").exists()  # no side-car

@@ -11,8 +11,8 @@ import re
 import numpy as np
 import pytest
 from granflow.errors import ParameterError
+from granflow.material import MATERIAL_000
 from granflow.scenes.channel import RCP, Channel
-from granflow.simulation import ContactLaw, contact_time
 
 INF, NAN = math.inf, math.nan
 
@@ -50,20 +50,24 @@ REFUSED = [
     ({"e_n": NAN}, "e_n"),
     ({"mu": -0.1}, "mu"),
     ({"mu": INF}, "mu"),
-    ({"kt": -1.0}, "kt"),
+    ({"kt_ratio": -1.0}, "kt_ratio"),
+    ({"kt_ratio": 20.0}, "kt_ratio"),
     ({"xi_t_ratio": -0.5}, "xi_t_ratio"),
     ({"wall_kn": 0.0}, "wall_kn"),
     ({"wall_e_n": 0.0}, "wall_e_n"),
     ({"wall_mu": -1.0}, "wall_mu"),
     ({"sizes": {1.0: 0.5, INF: 0.5}}, "sizes"),
+    ({"sizes": [1.1, 0.9]}, "sizes"),
     ({"form": "linear"}, "form"),
+    ({"tc_reading": "mass"}, "tc_reading"),
+    ({"material": "001"}, "material"),
     # time step: finite, > 0, and <= t_c/10 as the kernel demands at the release
     ({"dt": 0.0}, "dt"),
     ({"dt": -1e-4}, "dt"),
     ({"dt": NAN}, "dt"),
     ({"dt": INF}, "dt"),
     ({"dt": 2e-4}, "dt"),  # t_c/10 = 1.375e-4 at kn = 1e6, e_n = 0.82, d_min = 0.9
-    ({"kn": 1e7}, "dt"),  # the default dt, 1.2e-4, against t_c/10 = 4.35e-5
+    ({"kn": 1e7, "dt": 1.2e-4}, "dt"),  # 000's dt at kn = 1e6 against t_c/10 = 4.35e-5
     # preparation and sampling
     ({"settle_ke": 0.0}, "settle_ke"),
     ({"settle_ke": NAN}, "settle_ke"),
@@ -84,8 +88,9 @@ def test_bad_input_is_refused_on_construction_naming_the_parameter(kw, name):
         Channel(**kw)
 
 
-def t_c(kn: float = 1e6, e_n: float = 0.82, d_min: float = 0.9) -> float:
-    return contact_time(ContactLaw(kn=kn, e_n=e_n), np.array([d_min]))
+def t_c(kn: float = 1e6, e_n: float = 0.82) -> float:
+    # the lightest pair of 000's mix (d_min = 0.9)
+    return MATERIAL_000.with_(kn=kn, e_n=e_n).contact_time("lightest")
 
 
 ACCEPTED = [
@@ -100,6 +105,9 @@ ACCEPTED = [
     {"kn": 1e5, "dt": t_c(1e5) / 10, "form": "hertz"},
     # the step the repository uses: 1.2e-4 sqrt(1e6/kn) ~ t_c/11.5
     *({"kn": kn, "dt": 1.2e-4 * math.sqrt(1e6 / kn)} for kn in (1e5, 1e6, 1e7, 1e8)),
+    # ... which is the material's rule when dt is not given
+    *({"kn": kn} for kn in (1e5, 1e7, 1e8)),
+    {"material": "002", "kn": 1e6, "W": 8, "H": 12, "B": 4},  # a material by name
     {"W": 8, "H": 12, "B": 4, "phi_bar": 0.6, "kn": 1e5, "dt": 3e-4, "seed": 2},
 ]
 
@@ -107,7 +115,9 @@ ACCEPTED = [
 @pytest.mark.parametrize("kw", ACCEPTED)
 def test_allowed_edge_values_are_accepted(kw):
     c = Channel(**kw)
-    assert c.sim is None  # nothing ran
+    assert not c.prepared  # nothing ran
+    if "dt" not in kw and c.mat.dt_rule is not None and c.mat.dt_rule.kind == "kn_scaled":
+        assert c.timestep == 1.2e-4 * math.sqrt(1e6 / c.mat.kn_value)
     e = c.bin_edges()
     assert e[0] == 0 and e[-1] == c.W and len(e) >= 4  # two wall bins and an interior bin
     assert np.isclose(e[1], c.wall_bin) and np.isclose(c.W - e[-2], c.wall_bin)
@@ -124,7 +134,7 @@ def test_prepare_refuses_a_phi_bar_this_channel_cannot_pack():
     c = Channel(**SMALL, phi_bar=0.64)
     with pytest.raises(ParameterError, match=r"invalid phi_bar = 0\.64: allowed .*overlaps"):
         c.prepare(progress=False)
-    assert c.sim is None  # refused before the run's simulation exists
+    assert not c.prepared  # refused before the run's simulation exists
 
 
 def test_prepare_accepts_a_dense_phi_bar_it_can_pack():
@@ -133,4 +143,4 @@ def test_prepare_accepts_a_dense_phi_bar_it_can_pack():
     assert c.prep_info["compressed"]
     assert c.prep_info["phi_bar_achieved"] == pytest.approx(0.62, abs=2e-3)
     c.run(1, progress=False)
-    assert c.sim is not None and c.sim.diagnostics()["max_overlap"] < 0.01
+    assert c.prepared and c.core.diagnostics()["max_overlap"] < 0.01

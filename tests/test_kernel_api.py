@@ -127,9 +127,12 @@ def test_damping_given_twice_is_refused():
 
 
 def test_contact_time_without_a_simulation(gas, make_sim):
+    # the material's lightest-pair contact time is the kernel's, without building a simulation
+    from granflow.material import Material
+
     box, x, d, v = gas
-    law = gf.ContactLaw(kn=1e5, e_n=0.7, mu=0.5)
-    s = make_sim(box, x, d, v, law=law)
-    assert gf.simulation.contact_time(law, d) == pytest.approx(s.contact_time, rel=1e-12)
-    with pytest.raises(gf.ParameterError, match="xi_n"):
-        gf.simulation.contact_time(gf.ContactLaw(kn=1.0, xi_n=1e3), d)  # over-damped
+    mat = Material(sizes=gf.sizes.uniform(0.9, 1.1), kn=1e5, e_n=0.7, mu=0.5)
+    s = make_sim(box, x, d, v, law=mat.law())
+    assert mat.contact_time("lightest", d) == pytest.approx(s.contact_time, rel=1e-12)
+    with pytest.raises(gf.ParameterError, match="pair"):
+        mat.contact_time("heaviest", d)

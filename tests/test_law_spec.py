@@ -92,6 +92,7 @@ def test_channel_wall_law_takes_the_kernel_kt():
     from granflow.scenes.channel import Channel
 
     ch = Channel(kn=2e5, wall_kn=3e5)
-    assert ch.wall_law.as_dict() == _core.resolve_law({"kn": 3e5, "e_n": ch.e_n, "mu": ch.mu})
+    assert ch.wall_law.as_dict() == _core.resolve_law({"kn": 3e5, "e_n": ch.law.e_n,
+                                                       "mu": ch.law.mu})
     assert ch.wall_law.kt == 2 / 7 * 3e5 and ch.law.kt == 2 / 7 * 2e5
     assert Channel(kn=2e5).wall_law == ch.law

@@ -74,7 +74,7 @@ def test_cell_series_equals_the_reference():
     c.run(6000, progress=False)
     c.tables()
     c.load_tables({})
-    core = c.sim
+    core = c.core
     rows = []
     for _ in range(12):
         core.run(49)

@@ -54,14 +54,45 @@ def test_scenes_keep_the_protocol(scene_kind):
     assert s.scene_name == scene_kind
 
 
-def test_channel_core_needs_an_explicit_preparation():
-    ch = FACTORIES["channel"]()
+def test_core_needs_an_explicit_preparation(scene_kind):
+    # the same construction rule for every scene: the kernel is built by prepare()
+    sc = FACTORIES[scene_kind]()
+    assert not sc.prepared
     with pytest.raises(gf.ConfigurationError, match="prepare"):
-        ch.core  # noqa: B018
-    ch.prepare()
-    x = ch.core.positions()
-    ch.prepare()  # a second call changes nothing
-    assert np.array_equal(ch.core.positions(), x)
+        sc.core  # noqa: B018
+    sc.prepare()
+    assert sc.prepared
+    x = sc.core.positions()
+    sc.prepare()  # a second call changes nothing
+    assert np.array_equal(sc.core.positions(), x)
+
+
+SHARED = {"mu": 0.2, "kt_ratio": 0.5, "e_n": 0.7, "sizes": [0.95, 1.05]}
+
+
+def test_one_vocabulary_across_scenes(scene_kind):
+    # the shared parameters have the same names and meanings in every scene: they reach the
+    # kernel's law, and parameters() and summary() report them under the same keys
+    cls = type(FACTORIES[scene_kind]())
+    base = {"gas": {"L": 6.0}, "cell": {"N": 60},
+            "channel": {"W": 6, "H": 8, "B": 3.5, "kn": 1e5}}[scene_kind]
+    sc = cls(**base, **SHARED, dt=1e-4, sample_every=50, seed=3)
+    sc.prepare()
+    law = sc.core.law()
+    assert law["mu"] == 0.2 and law["kt"] == pytest.approx(0.5 * law["kn"]) and law["e_n"] == 0.7
+    d = sc.core.diameters()
+    assert d.min() >= 0.95 and d.max() <= 1.05 and sc.core.dt == 1e-4
+    p = sc.parameters()
+    assert {k: p[k] for k in SHARED} == SHARED and p["seed"] == 3 and p["sample_every"] == 50
+    sc.run(100, progress=False)
+    assert sc.summary()["n"] == sc.core.n == p.get("n", sc.core.n)
+
+
+def test_a_checkpoint_of_another_scene_is_refused(tmp_path):
+    g = FACTORIES["gas"]()
+    g.run(10, progress=False, checkpoint=tmp_path / "g.gfck")
+    with pytest.raises(gf.ParameterError, match="'gas'.*allowed a 'cell' checkpoint"):
+        FACTORIES["cell"]().restore(tmp_path / "g.gfck")
 
 
 def test_run_writes_checkpoints_every_n_steps_and_at_the_end(scene_kind, tmp_path, monkeypatch):
@@ -131,3 +162,10 @@ def test_simulation_run_writes_its_checkpoint_at_the_end(gas, make_sim, tmp_path
     assert r.step == 30 and np.array_equal(r.get_positions(), s.get_positions())
     with pytest.raises(gf.ParameterError, match="checkpoint_every"):
         s.run(10, progress=False, checkpoint_every=5)
+
+
+def test_the_scenes_with_an_error_report_are_the_reports_table():
+    from granflow.analysis.report import REPORTS
+    from granflow.scenes import SCENES
+
+    assert {name for name, cls in SCENES.items() if cls.error_report} == set(REPORTS)

@@ -104,7 +104,7 @@ def test_sheared_cell_one_and_two_threads_same_bits() -> None:
     for threads in (1, 2):
         cell = ShearCell(N=2000, phi0=0.3, p_ext=1e-3, tau_ratio=0.5, seed=3, threads=threads)
         cell.run(3000, progress=False)
-        core = cell.sim
+        core = cell.core
         d = core.diagnostics()
         assert d["list_builds"] > 5 and d["list_prunes"] > d["list_builds"]
         runs.append((core.positions(), core.velocities(), np.asarray(core.cell()[0])))

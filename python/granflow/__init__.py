@@ -3,13 +3,16 @@
 A Rust kernel (spring–dashpot contacts with tangential history and Coulomb friction; linear and
 Hertzian) driven from Python; results as Arrow/Parquet tables with error bars.
 
-Scenes from the papers live in :mod:`granflow.scenes`; analysis in :mod:`granflow.analysis`.
+Scenes from the papers live in :mod:`granflow.scenes`, their materials in
+:mod:`granflow.material`, the flow states in :mod:`granflow.states`; analysis in
+:mod:`granflow.analysis`.
 """
 
-from granflow import sizes
+from granflow import material, sizes, states
 from granflow._core import __version__
 from granflow.errors import (
     ConfigurationError,
+    DilationError,
     GranflowError,
     GranflowIOError,
     InstabilityError,
@@ -34,10 +37,13 @@ __all__ = [
     "maxwell_velocities",
     "random_packing",
     "to_table",
+    "material",
     "sizes",
+    "states",
     "GranflowError",
     "ParameterError",
     "ConfigurationError",
     "InstabilityError",
+    "DilationError",
     "GranflowIOError",
 ]

@@ -124,7 +124,7 @@ def box_sim(
     wall_law: Mapping[str, float] | None = None,
     gravity: Sequence[float] | None = None,
     dt: float | None = None,
-    skin: float = 0.3,
+    skin: float = ...,
     v: _F64Array | None = None,
     omega: _F64Array | None = None,
 ) -> Sim: ...
@@ -139,7 +139,7 @@ def cell_sim(
     tau_ext: float,
     wg: float,
     dt: float | None = None,
-    skin: float = 0.3,
+    skin: float = ...,
 ) -> Sim: ...
 def insert_spheres(
     diameter: _F64Array,

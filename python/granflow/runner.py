@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 from granflow import io
 from granflow._core import __version__
 from granflow.errors import GranflowError, ParameterError
-from granflow.scenes import check_keys, get_scene
+from granflow.scenes import SCENES, check_keys, get_scene
 
 RUN_KEYS = {"steps": 0, "chunk": 0, "checkpoint_every": 0}
 OUTPUT_KEYS = {"snapshot_every": 0, "snapshot_format": "xyz", "tables": True}
@@ -55,7 +55,7 @@ def load_spec(path: str | os.PathLike) -> dict[str, Any]:
 def validate_spec(spec: Mapping[str, Any]) -> dict[str, Any]:
     check_keys("spec", spec, TOP_KEYS)
     if "scene" not in spec:
-        raise ParameterError("invalid spec: missing key 'scene': allowed 'channel', 'cell', 'gas'")
+        raise ParameterError(f"invalid spec: missing key 'scene': allowed one of {sorted(SCENES)}")
     run = dict(spec.get("run", {}))
     check_keys("run", run, RUN_KEYS)
     steps = run.get("steps")
@@ -193,7 +193,7 @@ def execute(
     with io.atomic_path(d / "summary.json") as tmp:
         tmp.write_text(json.dumps(io._jsonable(summary), indent=1, sort_keys=True))
     save_all("finished")
-    if spec["scene"] in ("channel", "cell"):
+    if cls.error_report:
         # statistical error against run time, beside the results (errors.parquet, errors.txt)
         try:
             from granflow.analysis.report import error_report_for_run

@@ -94,7 +94,8 @@ class Simulation:
     """A DEM simulation in an orthogonal box (see ``granflow.scenes`` for the papers' scenes).
 
     Parameters are validated by the kernel; errors are :class:`granflow.ParameterError` naming
-    the parameter and its allowed range.
+    the parameter and its allowed range. ``dt`` None is the kernel's default (t_c/50 of the
+    stiffest, lightest pair); ``skin`` None the kernel's default neighbour-list skin.
     """
 
     positions: np.ndarray
@@ -108,7 +109,7 @@ class Simulation:
     wall_law: ContactLaw | None = None
     gravity: tuple[float, float, float] | None = None
     dt: float | None = None
-    skin: float = 0.3
+    skin: float | None = None
     threads: int | None = None
     _sim: _core.Sim = field(init=False, repr=False)
 
@@ -125,6 +126,8 @@ class Simulation:
             )
         if self.law.form not in ("hooke", "hertz"):
             raise ParameterError(f"invalid form = {self.law.form!r}: allowed 'hooke' or 'hertz'")
+        # the skin is passed only when set: unset, the kernel's default applies
+        extra: dict[str, Any] = {} if self.skin is None else {"skin": float(self.skin)}
         self._sim = _core.box_sim(
             x,
             d,
@@ -138,11 +141,11 @@ class Simulation:
             wall_law=self.wall_law.as_dict() if self.wall_law else None,
             gravity=tuple(map(float, self.gravity)) if self.gravity is not None else None,
             dt=self.dt,
-            skin=float(self.skin),
             v=None if self.velocities is None else np.ascontiguousarray(self.velocities, float),
             omega=None
             if self.angular_velocities is None
             else np.ascontiguousarray(self.angular_velocities, float),
+            **extra,
         )
         if self.threads is not None:
             self._sim.threads = int(self.threads)
@@ -191,9 +194,15 @@ class Simulation:
             "skin": self.skin,
         }
 
-    def save_checkpoint(self, path: str | os.PathLike) -> None:
-        """Write the complete state (particles, contact histories, step, time) atomically."""
-        self._sim.save_checkpoint(os.fspath(path), json.dumps(self._rebuild_params()))
+    def save_checkpoint(self, path: str | os.PathLike, scene: dict[str, Any] | None = None
+                        ) -> None:
+        """Write the complete state (particles, contact histories, step, time) atomically;
+        ``scene`` is a scene's record in the header (:func:`granflow.scenes.write_checkpoint`),
+        kept beside what rebuilds the simulation."""
+        head = self._rebuild_params()
+        if scene is not None:
+            head["scene"] = scene
+        self._sim.save_checkpoint(os.fspath(path), json.dumps(head))
 
     @classmethod
     def from_checkpoint(cls, path: str | os.PathLike, threads: int | None = None,
@@ -398,16 +407,6 @@ def to_table(batch: _core.ArrowBatch) -> pa.Table:
     """Import a kernel batch through the Arrow C data interface (no copy of the buffers)."""
     rb = pa.record_batch(batch)
     return pa.Table.from_batches([rb])
-
-
-def contact_time(law: ContactLaw, diameters: np.ndarray, density: float = 1.0) -> float:
-    """Contact duration t_c of the stiffest, lightest pair (linear law, 000 App. A) for these
-    particles, without building a simulation: what ``Simulation.contact_time`` reports."""
-    d = np.asarray(diameters, dtype=float)
-    if d.size == 0:
-        raise ParameterError("invalid diameters = []: allowed at least one particle")
-    m_min = density * np.pi / 6.0 * float(d.min()) ** 3
-    return float(_core.contact_time(law.as_dict(), 0.5 * m_min))
 
 
 def random_packing(

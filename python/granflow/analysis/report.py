@@ -77,7 +77,6 @@ CHANNEL_FIGURES: tuple[str, ...] = (
     "u_y-profile",
 )
 CELL_FIGURES: tuple[str, ...] = ("mu1", "mu2", "mu3", "phi", "I")
-FIGURES: dict[str, tuple[str, ...]] = {"channel": CHANNEL_FIGURES, "cell": CELL_FIGURES}
 
 TABLE_SCHEMA = {
     "figure": pl.Utf8,
@@ -410,6 +409,18 @@ def _cell_report(
     return results, values, float(t[start]) if t.size > start else math.nan, notes
 
 
+_ReportFn = Callable[..., tuple[dict[str, SEvsTime], dict[str, float], float, list[str]]]
+
+#: The one table of error reports: per scene name (the TOML ``scene``; a scene that has one
+#: says so as ``error_report``, analysis does not import the scenes), its figures and the
+#: function that computes them.
+REPORTS: dict[str, tuple[tuple[str, ...], _ReportFn]] = {
+    "channel": (CHANNEL_FIGURES, _channel_report),
+    "cell": (CELL_FIGURES, _cell_report),
+}
+FIGURES: dict[str, tuple[str, ...]] = {name: figs for name, (figs, _) in REPORTS.items()}
+
+
 # --------------------------------------------------------------------------------------------
 # entry points
 # --------------------------------------------------------------------------------------------
@@ -448,7 +459,7 @@ def error_vs_time(
     t_begin, t_end = _time_span(tables)
     span = t_end - t_begin
     w = float(wall_seconds) / span if span > 0 and wall_seconds is not None else None
-    fn = _channel_report if scene == "channel" else _cell_report
+    fn = REPORTS[scene][1]
     results, values, t_start, notes = fn(tables, w, fractions, min_blocks, start_time)
     rows: list[pl.DataFrame] = []
     est: list[dict[str, Any]] = []

@@ -1,6 +1,6 @@
-"""What every scene shares: the scene table, the key check, the :class:`Scene` protocol, the
-sample tables drained from the kernel's samplers and the run loop that honours ``checkpoint`` /
-``checkpoint_every``.
+"""What every scene shares: the scene table, the key check, the material and its flat
+overrides, the :class:`Scene` protocol, the sample tables drained from the kernel's samplers, the
+checkpoint header and the run loop that honours ``checkpoint`` / ``checkpoint_every``.
 
 The scene modules (:mod:`granflow.scenes.channel`, :mod:`granflow.scenes.cell`,
 :mod:`granflow.scenes.gas`) import from here and :mod:`granflow.scenes` imports them, so the
@@ -9,15 +9,19 @@ imports run one way.
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Callable, Mapping
+from dataclasses import fields
 from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
+import numpy as np
 import pyarrow as pa
 
 from granflow import _core
 from granflow.errors import ParameterError
-from granflow.simulation import check_checkpoint_args, to_table
+from granflow.material import MATERIALS, Material
+from granflow.simulation import Simulation, check_checkpoint_args, to_table
 
 SCENES: dict[str, type] = {}
 
@@ -44,6 +48,75 @@ def check_keys(section: str, given: Mapping[str, Any], allowed: Mapping[str, Any
             raise ParameterError(
                 f"invalid {section}.{k}: unknown key: allowed one of {sorted(allowed)}"
             )
+
+
+#: The material's fields a scene takes as flat overrides (same names and meanings in every
+#: scene; None leaves the material's value).
+MATERIAL_KEYS = ("sizes", "density", "kn", "kt_ratio", "e_n", "xi_t_ratio", "mu", "form",
+                 "tc_reading", "skin")
+
+
+def material_overrides(scene: Any) -> dict[str, Any]:
+    """The flat material overrides a scene was given (those not None)."""
+    return {k: getattr(scene, k) for k in MATERIAL_KEYS if getattr(scene, k) is not None}
+
+
+def resolve_material(given: Material | str | None, default: Material,
+                     overrides: Mapping[str, Any]) -> Material:
+    """A scene's material: ``given`` (a :class:`Material`, a name of
+    :data:`granflow.material.MATERIALS`, or None for the scene's ``default``) with the flat
+    ``overrides`` applied (:meth:`Material.with_`)."""
+    if given is None:
+        base = default
+    elif isinstance(given, Material):
+        base = given
+    elif isinstance(given, str) and given in MATERIALS:
+        base = MATERIALS[given]
+    else:
+        raise ParameterError(f"invalid material = {given!r}: allowed a Material or one of "
+                             f"{sorted(MATERIALS)}")
+    return base.with_(**overrides) if overrides else base
+
+
+def check_run_keys(params: Mapping[str, Any], cls: type) -> None:
+    """Refuse a spec's ``params`` key that is not a field of the scene class ``cls`` (seed and
+    threads come from the spec's top level)."""
+    check_keys("params", params, {f.name for f in fields(cls)} - {"seed", "threads"})
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, Material):
+        return v.parameters()
+    return str(v)
+
+
+def write_checkpoint(scene: Scene, path: str | os.PathLike[str], state: Mapping[str, Any],
+                     sim: Simulation | None = None) -> None:
+    """Write ``scene``'s checkpoint: the kernel state with one JSON header layout for every
+    scene, ``{"scene": {"scene": name, "parameters": scene.parameters(), "state": state}}``
+    (``state``: what the scene needs back on :meth:`Scene.restore`, e.g. the channel's
+    preparation record or the cell's shear start), beside what rebuilds ``sim`` when the scene
+    runs on a :class:`~granflow.simulation.Simulation`."""
+    head = {"scene": scene.scene_name, "parameters": scene.parameters(), "state": dict(state)}
+    head = json.loads(json.dumps(head, default=_jsonable))
+    if sim is not None:
+        sim.save_checkpoint(path, scene=head)
+    else:
+        scene.core.save_checkpoint(os.fspath(path), json.dumps({"scene": head}))
+
+
+def read_checkpoint_state(path: str | os.PathLike[str], scene_name: str) -> dict[str, Any]:
+    """The ``state`` a scene's checkpoint holds (:func:`write_checkpoint`); a checkpoint of
+    another scene, or none, is refused."""
+    params = _core.read_checkpoint_header(os.fspath(path))[1]
+    head = json.loads(params or "{}").get("scene")
+    if not isinstance(head, dict) or head.get("scene") != scene_name:
+        got = head.get("scene") if isinstance(head, dict) else None
+        raise ParameterError(f"invalid checkpoint {os.fspath(path)!r}: written by scene "
+                             f"{got!r}: allowed a {scene_name!r} checkpoint")
+    return dict(head.get("state", {}))
 
 
 class SampleTables:
@@ -89,21 +162,29 @@ class Scene(Protocol):
 
     * ``from_spec(params, seed, threads)`` builds a scene from the ``params`` of a TOML spec;
       ``parameters()`` gives back every parameter (defaults included) for the tables' metadata.
-    * ``prepare()`` makes the kernel simulation (a scene with a preparation protocol, like the
-      channel's fill and release or the cell's compaction, runs it here); it is idempotent, and
-      ``run`` calls it. The kernel's step count may not be 0 after it (the cell's compaction is
-      part of its series); the runner counts a spec's ``steps`` from there.
-    * ``core`` is the kernel simulation (:class:`granflow._core.Sim`) of a prepared scene.
+    * Construction only checks the parameters; ``prepare()`` makes the kernel simulation (a
+      scene with a preparation protocol, like the channel's fill and release or the cell's
+      compaction, runs it here); it is idempotent, and ``run`` calls it. The kernel's step
+      count may not be 0 after it (the cell's compaction is part of its series); the runner
+      counts a spec's ``steps`` from there.
+    * ``core`` is the kernel simulation (:class:`granflow._core.Sim`) of a prepared scene (the
+      one accessor: before ``prepare``, ``restore`` or ``run`` it raises
+      :class:`granflow.ConfigurationError`); ``prepared`` says whether it exists.
     * ``run(steps, progress, checkpoint, checkpoint_every)`` advances ``steps`` steps; with
       ``checkpoint`` set it writes the scene's checkpoint there every ``checkpoint_every``
       steps (at multiples of it in the step count), at the end, and when interrupted (Ctrl-C,
       SIGTERM) before the interrupt propagates.
     * ``tables()`` are the sample tables by name; ``load_tables`` takes them back on a restart;
-      ``summary()`` is the scene's analysis flattened to scalars (with standard errors).
-    * ``save_checkpoint(path)`` / ``restore(path)``: the kernel state, bitwise.
+      ``summary()`` is the scene's analysis flattened to scalars: ``n`` (the particle count),
+      ``state`` (a :class:`granflow.states.FlowState`, where the scene classifies its flow)
+      and each value ``x`` with its standard error ``x_se``.
+    * ``save_checkpoint(path)`` / ``restore(path)``: the kernel state, bitwise, with the
+      header :func:`write_checkpoint` writes.
     """
 
     scene_name: ClassVar[str]
+    #: whether the runner writes the statistical-error report (granflow.analysis.report)
+    error_report: ClassVar[bool]
     #: periodic axes (x, y, z), for snapshots
     pbc: tuple[bool, bool, bool]
 
@@ -117,6 +198,9 @@ class Scene(Protocol):
 
     @property
     def core(self) -> _core.Sim: ...
+
+    @property
+    def prepared(self) -> bool: ...
 
     def run(self, steps: int, progress: bool | None = None,
             checkpoint: str | os.PathLike[str] | None = None,

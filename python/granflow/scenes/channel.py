@@ -7,19 +7,25 @@ Preparation (paper fig. 2, "fill and release"): spheres are placed at random in 
 above a floor, poured under gravity and settled; then the floor is removed and y made periodic
 with period H. Protocol details that the paper leaves open, and our choices:
 
-* pouring is frictionless and uses min(kn, prep_kn = 1e4), e_n = 0.3, dt = t_c/20 for speed; the
-  bed is settled when the kinetic energy per particle is below ``settle_ke`` m g d; friction and
-  the run's stiffness, restitution and dt apply from the release on (all tangential histories
-  start at zero at the release);
-* the soft pour's overlaps are relaxed at the run's kn (1000 damped steps, velocities
-  quenched) so that a stiff run does not start with stored elastic energy;
-  if the settled bed is taller than H (phi_bar close to the packing fraction) it is compressed
-  affinely into [0, H) and relaxed without gravity before the release; if that relaxation
-  leaves overlaps >= 0.01 d the packing cannot hold phi_bar (the densest bed depends on the
-  channel's size: the pour packs to ~0.57-0.59 up to its rough top in channels 8-10 d wide,
-  ~0.61 at W = 20 d; squeezed to 0.63 the bed keeps overlaps of 0.017-0.019 d at W = 8-10 d,
-  0.008 d at W = 20 d)
-  and ``prepare`` refuses phi_bar (docs/channel.md, "Input checks");
+* pour (``_pour``): from a random insertion at phi = ``PHI_INSERT`` = 0.3, frictionless, with
+  min(kn, prep_kn = 1e4), e_n = ``POUR_E_N`` = 0.3, dt = t_c/``POUR_DT_DIVISOR`` = t_c/20 for
+  speed; the bed is settled when the kinetic energy per particle is below ``settle_ke`` m g d
+  (checked every ``SETTLE_CHECK_TIME``, giving up after ``SETTLE_T_BASE`` + ``SETTLE_T_FALLS``
+  t_fall = 40 + 4 t_fall); friction and the run's stiffness, restitution and dt apply from the
+  release on (all tangential histories start at zero at the release);
+* relax (``_relax``): the soft pour's overlaps are relaxed at the run's kn (``RELAX_ROUNDS`` x
+  ``RELAX_ROUND_STEPS`` = 1000 damped steps, velocities quenched) so that a stiff run does not
+  start with stored elastic energy;
+* squeeze (``_squeeze``): if the settled bed is taller than H (phi_bar close to the packing
+  fraction) it is compressed affinely into [0, H) (its top ``SQUEEZE_TOP_MARGIN`` d_max below
+  H) and relaxed without gravity (at most ``SQUEEZE_ROUNDS`` x ``SQUEEZE_ROUND_STEPS`` steps)
+  before the release; if that relaxation leaves overlaps >= ``PREP_MAX_OVERLAP`` = 0.01 d the
+  packing cannot hold phi_bar (the densest bed depends on the channel's size: the pour packs to
+  ~0.57-0.59 up to its rough top in channels 8-10 d wide, ~0.61 at W = 20 d; squeezed to 0.63
+  the bed keeps overlaps of 0.017-0.019 d at W = 8-10 d, 0.008 d at W = 20 d) and ``prepare``
+  refuses phi_bar (docs/channel.md, "Input checks");
+* release (``_release``): the floor goes, y becomes periodic with period H, the run's law and
+  dt apply;
 * the achieved phi_bar is exact: (total particle volume) / (W H B) with whole particles.
 
 Statistics (000 eqs 2.1–2.5) are taken inside the kernel's step loop (``granflow._core``
@@ -34,12 +40,11 @@ fluctuations about the window's bin means) is said in src/sampling/channel.rs.
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
@@ -47,16 +52,50 @@ import pyarrow as pa
 
 from granflow import _core
 from granflow.errors import ConfigurationError, ParameterError
-from granflow.simulation import Box, ContactLaw, Simulation, Wall, contact_time, run_chunked
-from granflow.sizes import SizeDist, discrete
+from granflow.material import MATERIAL_000, Material, kernel_default_skin
+from granflow.simulation import Box, ContactLaw, Simulation, Wall, run_chunked
+from granflow.sizes import SizeDist
+from granflow.states import FlowState
 
-from ._base import SampleTables, check_keys, register, run_with_checkpoints
+from ._base import (
+    SampleTables,
+    check_run_keys,
+    material_overrides,
+    read_checkpoint_state,
+    register,
+    resolve_material,
+    run_with_checkpoints,
+    write_checkpoint,
+)
 
 #: random close packing: no phi_bar above it can be packed (refused on construction); below it
 #: the densest bed the fill and release reaches depends on the channel's size, so ``prepare``
 #: refuses a phi_bar whose squeezed bed keeps overlaps >= PREP_MAX_OVERLAP d
 RCP = 0.64
 PREP_MAX_OVERLAP = 0.01
+
+# -- the preparation's protocol (module docstring) ---------------------------------------------
+#: volume fraction of the random insertion the pour starts from
+PHI_INSERT = 0.3
+#: restitution of the (frictionless, soft) pour and of the relaxations
+POUR_E_N = 0.3
+#: the pour's and the relaxations' dt = t_c / POUR_DT_DIVISOR (lightest pair of their law)
+POUR_DT_DIVISOR = 20
+#: the pour gives up after SETTLE_T_BASE + SETTLE_T_FALLS t_fall (t_fall = sqrt(2 h_fill))
+SETTLE_T_BASE = 40.0
+SETTLE_T_FALLS = 4
+#: the pour's kinetic energy is checked every SETTLE_CHECK_TIME sqrt(d/g)
+SETTLE_CHECK_TIME = 0.5
+#: a squeezed bed's top ends SQUEEZE_TOP_MARGIN d_max below H
+SQUEEZE_TOP_MARGIN = 0.5
+#: the squeezed bed relaxes in at most SQUEEZE_ROUNDS rounds of SQUEEZE_ROUND_STEPS steps
+SQUEEZE_ROUNDS = 20
+SQUEEZE_ROUND_STEPS = 200
+#: the soft pour's overlaps relax at the run's kn in RELAX_ROUNDS rounds of RELAX_ROUND_STEPS
+RELAX_ROUNDS = 10
+RELAX_ROUND_STEPS = 100
+#: the inserted region is taller than the solid needs by HEADROOM_DMAX d_max
+HEADROOM_DMAX = 2
 
 
 class _Stages:
@@ -78,34 +117,54 @@ class _Stages:
         return t
 
 
-def _law(kn: float, e_n: float, mu: float, kt: float | None, ratio: float, form: str) -> ContactLaw:
-    return ContactLaw(kn=kn, e_n=e_n, mu=mu, kt=kt, xi_t_ratio=ratio, form=form)
+@dataclass
+class _Pour:
+    """The state the pour hands to the next stages."""
+
+    d: np.ndarray
+    x: np.ndarray
+    h_fill: float
+    vs: float
+    law: ContactLaw
+    dt: float
+    walls: list[Wall]
+    time: float = 0.0
+    steps: int = 0
+    ke: float = float("inf")
 
 
 @register("channel")
 @dataclass
 class Channel:
-    """Vertical channel scene. The material and contact law are 000's (§2, App. A); the
+    """Vertical channel scene. The material is 000's (:data:`granflow.material.MATERIAL_000`,
+    §2, App. A) unless ``material`` says otherwise; the flat overrides (``sizes``, ``kn``,
+    ``kt_ratio``, ``e_n``, ``mu``, ...) change one field of it (:mod:`granflow.scenes`). The
     geometry defaults are a reduced channel for quick runs, not the paper's: 000 runs
-    W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set them for its scale."""
+    W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set them for its scale.
+
+    ``dt`` None is the material's rule (000: 1.2e-4 sqrt(1e6/kn) sqrt(d/g)). The wall law is
+    the particles' unless ``wall_kn``, ``wall_e_n``, ``wall_mu`` are set (its k_t is the
+    kernel's default, 2/7 of the wall's kn). The kernel is built by :meth:`prepare`."""
 
     W: float = 20.0
     H: float = 30.0
     B: float = 40.0
     phi_bar: float = 0.60
-    sizes: dict[float, float] = field(default_factory=lambda: {0.9: 0.3, 1.0: 0.4, 1.1: 0.3})
-    density: float = 1.0
-    kn: float = 1e6
-    kt: float | None = None
-    e_n: float = 0.82
-    xi_t_ratio: float = 0.5
-    mu: float = 0.5
+    material: Material | str | None = None
+    sizes: Any = None
+    density: float | None = None
+    kn: float | None = None
+    kt_ratio: float | None = None
+    e_n: float | None = None
+    xi_t_ratio: float | None = None
+    mu: float | None = None
+    form: str | None = None
+    tc_reading: str | None = None
+    skin: float | None = None
+    dt: float | None = None
     wall_kn: float | None = None
     wall_e_n: float | None = None
     wall_mu: float | None = None
-    form: str = "hooke"
-    dt: float = 1.2e-4
-    skin: float = 0.3
     bin_width: float = 1.0
     wall_bin: float = 1.5
     sample_every: int | None = 100
@@ -116,19 +175,28 @@ class Channel:
     threads: int | None = None
 
     scene_name: ClassVar[str]
+    #: the runner writes the statistical-error report of a finished run
+    error_report: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
+        self.material = resolve_material(self.material, MATERIAL_000, material_overrides(self))
         self._validate()
-        self.sim: Simulation | None = None
+        self._sim: Simulation | None = None
         self.prep_info: dict[str, Any] = {}
         self._tables = SampleTables()
         self.pbc = (False, True, True)
+
+    @property
+    def mat(self) -> Material:
+        """The channel's material (``material`` with the flat overrides applied)."""
+        assert isinstance(self.material, Material)
+        return self.material
 
     # -- parameters ------------------------------------------------------------------------
     def _validate(self) -> None:
         """Refuse bad input on construction, before anything runs (docs/channel.md, "Input
         checks"); what only the preparation can tell (a phi_bar this channel cannot pack) is
-        refused by :meth:`prepare`."""
+        refused by :meth:`prepare`. The material checks its own fields."""
 
         def need(cond: bool, name: str, value: Any, allowed: str) -> None:
             if not cond:
@@ -142,18 +210,11 @@ class Channel:
             v = getattr(self, name)
             need(real(v) and v > 0, name, v, "a finite number > 0")
 
-        need(isinstance(self.sizes, Mapping) and len(self.sizes) > 0
-             and all(real(d) and d > 0 for d in self.sizes)
-             and all(real(f) and f >= 0 for f in self.sizes.values())
-             and abs(sum(self.sizes.values()) - 1) < 1e-6,
-             "sizes", self.sizes, "positive diameters with number fractions summing to 1")
-        sd = self.size_dist()
+        mat = self.mat
+        sd = mat.sizes
         dmax = sd.max
-        dmin = min(d for d, f in self.sizes.items() if f > 0)
-        for name in ("density", "kn", "skin", "settle_ke", "prep_kn"):
+        for name in ("settle_ke", "prep_kn"):
             positive(name)
-        need(real(self.e_n) and 0 < self.e_n <= 1, "e_n", self.e_n, "0 < e_n <= 1")
-        need(real(self.mu) and self.mu >= 0, "mu", self.mu, "a finite number >= 0")
         # a wall value left at None is the particle value; 0 is not "unset"
         need(self.wall_kn is None or (real(self.wall_kn) and self.wall_kn > 0), "wall_kn",
              self.wall_kn, "a finite number > 0, or None for kn")
@@ -161,20 +222,19 @@ class Channel:
              "wall_e_n", self.wall_e_n, "0 < wall_e_n <= 1, or None for e_n")
         need(self.wall_mu is None or (real(self.wall_mu) and self.wall_mu >= 0), "wall_mu",
              self.wall_mu, "a finite number >= 0, or None for mu")
-        need(self.form in ("hooke", "hertz"), "form", self.form, "'hooke' or 'hertz'")
-        self.law.as_dict()  # kt, xi_t_ratio: the kernel's own checks, naming the field
         need(isinstance(self.seed, (int, np.integer)) and not isinstance(self.seed, bool)
              and self.seed >= 0, "seed", self.seed, "an integer >= 0")
 
         # geometry: the kernel needs a periodic period >= 2 (d_max + skin)
+        skin = _skin(mat)
         need(real(self.W) and self.W >= 5 * dmax, "W", self.W,
              f">= 5 d_max = {5 * dmax:g} (a channel a few diameters wide)")
-        h_min = max(5 * dmax, 2 * (dmax + self.skin))
+        h_min = max(5 * dmax, 2 * (dmax + skin))
         need(real(self.H) and self.H >= h_min, "H", self.H,
              f">= max(5 d_max, 2 (d_max + skin)) = {h_min:g} (a periodic height a few "
              "diameters tall)")
-        need(real(self.B) and self.B >= 2 * (dmax + self.skin) + 0.5, "B", self.B,
-             f">= {2 * (dmax + self.skin) + 0.5:g} (two interaction ranges)")
+        need(real(self.B) and self.B >= 2 * (dmax + skin) + 0.5, "B", self.B,
+             f">= {2 * (dmax + skin) + 0.5:g} (two interaction ranges)")
         # bins: two wall bins and at least one interior bin of ~bin_width (bin_edges() would
         # otherwise make one interior bin narrower than bin_width or, below half a bin, none:
         # the right-hand "wall bin" then spans the interior too)
@@ -192,7 +252,7 @@ class Channel:
              "below it, prepare() refuses a phi_bar this channel's fill and release cannot "
              "pack)")
         vol = self.phi_bar * self.W * self.H * self.B
-        v_mean = sum(f * np.pi * d**3 / 6 for d, f in self.sizes.items())
+        v_mean = sd.mean_volume
         # the preparation's own count (to the nearest whole particle, at least 1) when small
         n = vol / v_mean if vol > 10 * v_mean else len(sd.diameters_for_volume(vol, self.seed))
         need(n >= 2, "phi_bar", self.phi_bar,
@@ -201,11 +261,14 @@ class Channel:
 
         # dt: the kernel refuses dt > t_c/10 of the run's law (stiffest, lightest pair) when
         # the run's simulation is built, i.e. after the pour; refuse it here instead
-        need(real(self.dt) and self.dt > 0, "dt", self.dt, "a finite number > 0")
-        t_c = contact_time(self.law, np.array([dmin]), self.density)
-        need(self.dt <= t_c / 10, "dt", self.dt,
+        dt = self.timestep
+        need(dt is not None and real(dt) and dt > 0, "dt", self.dt,
+             "a finite number > 0, or None for the material's rule")
+        assert dt is not None
+        t_c = mat.contact_time("lightest")
+        need(dt <= t_c / 10, "dt", dt,
              f"<= t_c/10 = {t_c / 10:.4g} (t_c = {t_c:.4g}, the contact time of the lightest "
-             f"pair, d = {dmin:g}, at kn = {self.kn:g}, e_n = {self.e_n:g}; beyond it the "
+             f"pair, d = {sd.min:g}, at kn = {mat.kn_value:g}; beyond it the "
              "integration is inaccurate or unstable)")
         need(self.sample_every is None
              or (isinstance(self.sample_every, int) and self.sample_every >= 1), "sample_every",
@@ -213,36 +276,49 @@ class Channel:
         need(isinstance(self.window, int) and self.window >= 1, "window", self.window,
              "an integer >= 1")
 
+    @property
+    def timestep(self) -> float | None:
+        """The run's dt: ``dt``, or the material's rule."""
+        return self.dt if self.dt is not None else self.mat.dt()
+
     def size_dist(self) -> SizeDist:
-        return discrete({float(k): float(v) for k, v in self.sizes.items()})
+        """The material's size distribution."""
+        return self.mat.sizes
 
     @classmethod
     def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
                   threads: int | None = None) -> Channel:
-        check_keys("params", params, {f.name for f in fields(cls)} - {"seed", "threads"})
-        p = dict(params)
-        if "sizes" in p:
-            p["sizes"] = {float(k): float(v) for k, v in dict(p["sizes"]).items()}
-        return cls(**p, seed=seed, threads=threads)
+        """A channel from a TOML spec's ``params`` (the field names)."""
+        check_run_keys(params, cls)
+        return cls(**dict(params), seed=seed, threads=threads)
 
     def parameters(self) -> dict[str, Any]:
-        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "threads"}
-        out["sizes"] = {str(k): v for k, v in self.sizes.items()}
+        """Every parameter (the material's fields flat, ``law`` as the kernel resolves it,
+        ``dt`` the run's, ``n`` the particle count once prepared) and the preparation's record
+        (``prep_*``)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)
+               if f.name not in ("threads", "material")}
+        out.update(self.mat.parameters())
+        out.update(law=self.law.as_dict(), dt=self.timestep, n=self.prep_info.get("n"))
         out.update({f"prep_{k}": v for k, v in self.prep_info.items()})
         return out
 
     @property
     def law(self) -> ContactLaw:
-        return _law(self.kn, self.e_n, self.mu, self.kt, self.xi_t_ratio, self.form)
+        """The particles' contact law."""
+        return self.mat.law()
 
     @property
     def wall_law(self) -> ContactLaw:
-        return _law(self.wall_kn or self.kn, self.wall_e_n or self.e_n,
-                    self.mu if self.wall_mu is None else self.wall_mu,
-                    None,  # kt: the kernel's default, 2/7 of the wall's kn (LawSpec)
-                    self.xi_t_ratio, self.form)
+        """The walls' contact law."""
+        law = self.law
+        return ContactLaw(kn=self.wall_kn or law.kn, e_n=self.wall_e_n or law.e_n,
+                          mu=law.mu if self.wall_mu is None else self.wall_mu,
+                          kt=None,  # the kernel's default, 2/7 of the wall's kn (LawSpec)
+                          xi_t_ratio=law.xi_t_ratio, form=law.form)
 
     def bin_edges(self) -> np.ndarray:
+        """The bin edges across x (module docstring)."""
         interior = self.W - 2 * self.wall_bin
         n = max(int(round(interior / self.bin_width)), 0)
         inner = np.linspace(self.wall_bin, self.W - self.wall_bin, n + 1) if n else np.array(
@@ -251,31 +327,33 @@ class Channel:
             [0.0, self.wall_bin, self.W])
 
     # -- preparation -----------------------------------------------------------------------
-    def prepare(self, progress: bool | None = None) -> None:
-        """Fill and release (see the module docstring); does nothing if the channel is prepared
-        already (or restored from a checkpoint)."""
-        if self.sim is not None:
-            return
-        say = _Stages(progress)
+    def _relax_material(self, kn: float) -> Material:
+        """The pour's and the relaxations' material: frictionless, Hooke, e_n = POUR_E_N, the
+        kernel's k_t, at ``kn``."""
+        return self.mat.with_(kn=kn, e_n=POUR_E_N, mu=0.0, kt_ratio=None, form="hooke")
+
+    def _pour(self, say: _Stages) -> _Pour:
+        """Stage 1, pour: random insertion at PHI_INSERT in a tall box on a floor, poured
+        under gravity (soft, frictionless) until the bed settles."""
         vol_target = self.phi_bar * self.W * self.H * self.B
         d = self.size_dist().diameters_for_volume(vol_target, self.seed)
         vs = float(np.sum(np.pi * d**3 / 6))
-        phi_ins = 0.3
-        h_fill = vs / (self.W * self.B * phi_ins) + 2 * d.max()
+        h_fill = vs / (self.W * self.B * PHI_INSERT) + HEADROOM_DMAX * d.max()
         x = np.asarray(_core.insert_spheres(
             d, (0.0, 0.0, 0.0), (self.W, h_fill, self.B), (False, False, True), self.seed))
-        prep_law = _law(min(self.kn, self.prep_kn), 0.3, 0.0, None, self.xi_t_ratio, "hooke")
-        box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
+        soft = self._relax_material(min(self.mat.kn_value, self.prep_kn))
+        prep_law = soft.law()
         walls = [Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0), Wall(1, 0.0, 1.0)]
-        dt = contact_time(prep_law, d, self.density) / 20
+        dt = soft.contact_time("lightest", d) / POUR_DT_DIVISOR
+        box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
         sim = Simulation(x, d, box, prep_law, walls=walls, gravity=(0.0, -1.0, 0.0), dt=dt,
-                         threads=self.threads, density=self.density, skin=self.skin)
+                         threads=self.threads, density=self.mat.density, skin=self.mat.skin)
         m = sim.core.masses()
-        say(f"inserted {len(d)} spheres at phi = {phi_ins} in a {self.W:g} x {h_fill:.4g} x "
+        say(f"inserted {len(d)} spheres at phi = {PHI_INSERT} in a {self.W:g} x {h_fill:.4g} x "
             f"{self.B:g} box; pouring (kn = {prep_law.kn:g}, frictionless, dt = {dt:.3g})")
         t_fall = float(np.sqrt(2 * h_fill))
-        t_max = 40.0 + 4 * t_fall
-        check = max(int(0.5 / dt), 1)
+        t_max = SETTLE_T_BASE + SETTLE_T_FALLS * t_fall
+        check = max(int(SETTLE_CHECK_TIME / dt), 1)
         ke = np.inf
         while sim.time < t_max:
             sim.run(check, progress=False)
@@ -288,79 +366,99 @@ class Channel:
                 f"t = {t_max:.0f} sqrt(d/g) (kinetic energy per particle {ke:.2e} m g d); "
                 "allowed a larger value"
             )
-        settled = say(f"settled: kinetic energy per particle {ke:.2e} < settle_ke = "
-                      f"{self.settle_ke:g} m g d (after t >= sqrt(2 h_fill)) at t = "
-                      f"{sim.time:.1f} sqrt(d/g), {sim.step} steps")
-        x = sim.get_positions()
-        r = d / 2
+        return _Pour(d, sim.get_positions(), h_fill, vs, prep_law, dt, walls, float(sim.time),
+                     sim.step, float(ke))
+
+    def _squeeze(self, p: _Pour, x: np.ndarray) -> np.ndarray:
+        """Stage 2a, squeeze: a bed taller than H is compressed affinely into [0, H) and relaxed
+        without gravity (periodic in y); refuses a phi_bar whose bed stays overlapped."""
+        d, r = p.d, p.d / 2
         top = float(np.max(x[:, 1] + r))
+        ymax = self.H - SQUEEZE_TOP_MARGIN * d.max()
+        x[:, 1] = r + (x[:, 1] - r) * (ymax - r.max()) / (np.max(x[:, 1]) - r.max())
+        box = Box(length=(self.W, self.H, self.B), periodic=(False, True, True))
+        rel = Simulation(x, d, box, p.law, walls=p.walls[:2], dt=p.dt, threads=self.threads,
+                         density=self.mat.density, skin=self.mat.skin)
+        for _ in range(SQUEEZE_ROUNDS):
+            rel.run(SQUEEZE_ROUND_STEPS, progress=False)
+            rel.set_velocities(np.zeros_like(x))
+            overlap = rel.diagnostics()["max_overlap"]
+            if overlap < PREP_MAX_OVERLAP:
+                break
+        else:
+            # jammed: the bed cannot hold phi_bar in this channel without overlaps that
+            # a run would carry as a stiffness-set pressure (kn x overlap)
+            raise ParameterError(
+                f"invalid phi_bar = {self.phi_bar!r}: allowed a value this channel's fill "
+                f"and release can pack (squeezed into H = {self.H:g}, the bed still "
+                f"overlaps by {overlap:.3f} d >= {PREP_MAX_OVERLAP} d after relaxation; "
+                f"the pour reached {p.vs / (self.W * self.B * top):.3f} up to its top): a "
+                "lower phi_bar, or a wider channel")
+        return rel.get_positions()
+
+    def _relax(self, p: _Pour, x: np.ndarray) -> np.ndarray:
+        """Stage 2b, relax: the soft pour leaves overlaps ~ load/prep_kn; relax them at the
+        run's stiffness (frictionless, damped, same geometry and load) so the release does not
+        start with a burst of stored elastic energy at large kn."""
+        stiff = self._relax_material(self.mat.kn_value)
+        rel_box = Box(length=(self.W, p.h_fill, self.B), periodic=(False, False, True))
+        stiff_sim = Simulation(x, p.d, rel_box, stiff.law(), walls=p.walls,
+                               gravity=(0.0, -1.0, 0.0),
+                               dt=stiff.contact_time("lightest", p.d) / POUR_DT_DIVISOR,
+                               threads=self.threads, density=self.mat.density,
+                               skin=self.mat.skin)
+        for _ in range(RELAX_ROUNDS):
+            stiff_sim.run(RELAX_ROUND_STEPS, progress=False)
+            stiff_sim.set_velocities(np.zeros_like(x))
+            stiff_sim.set_angular_velocities(np.zeros_like(x))
+        return stiff_sim.get_positions()
+
+    def prepare(self, progress: bool | None = None) -> None:
+        """Fill and release (see the module docstring): pour, then squeeze (a bed taller than
+        H) or relax (a soft pour at a stiffer run), then release. Does nothing if the channel
+        is prepared already (or restored from a checkpoint)."""
+        if self._sim is not None:
+            return
+        say = _Stages(progress)
+        p = self._pour(say)
+        settled = say(f"settled: kinetic energy per particle {p.ke:.2e} < settle_ke = "
+                      f"{self.settle_ke:g} m g d (after t >= sqrt(2 h_fill)) at t = "
+                      f"{p.time:.1f} sqrt(d/g), {p.steps} steps")
+        x = p.x
+        top = float(np.max(x[:, 1] + p.d / 2))
         compressed = top > self.H
         if compressed:
-            # squeeze the bed affinely into [0, H) and relax without gravity
-            ymax = self.H - 0.5 * d.max()
-            x[:, 1] = r + (x[:, 1] - r) * (ymax - r.max()) / (np.max(x[:, 1]) - r.max())
-            box = Box(length=(self.W, self.H, self.B), periodic=(False, True, True))
-            rel = Simulation(x, d, box, prep_law, walls=walls[:2], dt=dt, threads=self.threads,
-                             density=self.density, skin=self.skin)
-            for _ in range(20):
-                rel.run(200, progress=False)
-                rel.set_velocities(np.zeros_like(x))
-                overlap = rel.diagnostics()["max_overlap"]
-                if overlap < PREP_MAX_OVERLAP:
-                    break
-            else:
-                # jammed: the bed cannot hold phi_bar in this channel without overlaps that
-                # a run would carry as a stiffness-set pressure (kn x overlap)
-                raise ParameterError(
-                    f"invalid phi_bar = {self.phi_bar!r}: allowed a value this channel's fill "
-                    f"and release can pack (squeezed into H = {self.H:g}, the bed still "
-                    f"overlaps by {overlap:.3f} d >= {PREP_MAX_OVERLAP} d after relaxation; "
-                    f"the pour reached {vs / (self.W * self.B * top):.3f} up to its top): a "
-                    "lower phi_bar, or a wider channel")
-            x = rel.get_positions()
-        if self.kn > self.prep_kn and not compressed:
-            # the soft pour leaves overlaps ~ load/prep_kn; relax them at the run's stiffness
-            # (frictionless, damped, same geometry and load) so the release does not start with
-            # a burst of stored elastic energy at large kn
-            # (a bed squeezed into H was already relaxed without gravity above)
-            stiff = _law(self.kn, 0.3, 0.0, None, self.xi_t_ratio, "hooke")
-            g = (0.0, -1.0, 0.0)
-            walls_now = walls
-            rel_box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
-            stiff_sim = Simulation(x, d, rel_box, stiff, walls=walls_now, gravity=g,
-                                   dt=contact_time(stiff, d, self.density) / 20,
-                                   threads=self.threads,
-                                   density=self.density, skin=self.skin)
-            for _ in range(10):
-                stiff_sim.run(100, progress=False)
-                stiff_sim.set_velocities(np.zeros_like(x))
-                stiff_sim.set_angular_velocities(np.zeros_like(x))
-            x = stiff_sim.get_positions()
-        done = say(f"released: {len(d)} spheres, phi_bar = {vs / (self.W * self.H * self.B):.4f}"
-                   f" ({'squeezed into H' if compressed else 'bed top'} "
+            x = self._squeeze(p, x)
+        elif self.mat.kn_value > self.prep_kn:
+            # (a bed squeezed into H was already relaxed without gravity)
+            x = self._relax(p, x)
+        vs = p.vs
+        done = say(f"released: {len(p.d)} spheres, phi_bar = "
+                   f"{vs / (self.W * self.H * self.B):.4f} "
+                   f"({'squeezed into H' if compressed else 'bed top'} "
                    f"{min(top, self.H):.4g}); relaxation {say.elapsed - settled:.1f} s")
-        self._release(x, d, {
-            "n": int(len(d)),
+        self._release(x, p.d, {
+            "n": int(len(p.d)),
             "phi_bar_achieved": vs / (self.W * self.H * self.B),
             "bed_top": top,
             "compressed": bool(compressed),
-            "settle_time": float(sim.time),
-            "settle_ke": float(ke),
+            "settle_time": p.time,
+            "settle_ke": p.ke,
             "pour_seconds": settled,
             "seconds": done,
         })
 
     def _release(self, x: np.ndarray, d: np.ndarray, prep_info: dict[str, Any]) -> None:
-        """The release: the run's simulation (periodic in y, walls, the run's law and dt) from
-        prepared positions ``x``, at rest."""
-        self.sim = Simulation(
+        """Stage 3, release: the run's simulation (periodic in y, walls, the run's law and dt)
+        from prepared positions ``x``, at rest."""
+        self._sim = Simulation(
             x, d, Box(length=(self.W, self.H, self.B), periodic=(False, True, True)), self.law,
-            density=self.density, walls=[Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0)],
-            wall_law=self.wall_law, gravity=(0.0, -1.0, 0.0), dt=self.dt, skin=self.skin,
-            threads=self.threads,
+            density=self.mat.density, walls=[Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0)],
+            wall_law=self.wall_law, gravity=(0.0, -1.0, 0.0), dt=self.timestep,
+            skin=self.mat.skin, threads=self.threads,
         )
         self.prep_info = dict(prep_info)
-        self._add_samplers(self.sim.core)
+        self._add_samplers(self._sim.core)
 
     def prepare_from(self, other: Channel) -> None:
         """Start from the prepared (released, at rest) packing of ``other`` instead of pouring
@@ -369,24 +467,27 @@ class Channel:
         run, with the same geometry."""
         other.prepare()
         core = other.core
-        for name in ("W", "H", "B", "density"):
+        for name in ("W", "H", "B"):
             if getattr(self, name) != getattr(other, name):
                 raise ParameterError(
                     f"invalid {name} = {getattr(self, name)!r}: allowed {getattr(other, name)!r} "
                     "(the packing's value)")
+        if self.mat.density != other.mat.density:
+            raise ParameterError(f"invalid density = {self.mat.density!r}: allowed "
+                                 f"{other.mat.density!r} (the packing's value)")
         if core.step != 0:
             raise ParameterError(
                 f"invalid source channel at step {core.step}: allowed a freshly prepared one "
                 "(step 0, at rest)")
         self._release(np.array(core.positions()), np.array(core.diameters()),
-                      {**other.prep_info, "prepared_with_kn": other.kn})
+                      {**other.prep_info, "prepared_with_kn": other.mat.kn_value})
 
     def branch_from(self, checkpoint: str | os.PathLike[str]) -> None:
         """Start from the state saved in another channel's checkpoint (positions, velocities
         and spins, e.g. a steady flow at another k_n) with this channel's law, dt and
         sampling; time and statistics start at zero, tangential springs at zero. The
         geometry must be the checkpoint's."""
-        if self.sim is not None:
+        if self._sim is not None:
             raise ConfigurationError("branch_from needs a channel not yet prepared")
         src = Simulation.from_checkpoint(checkpoint, threads=1)
         box = src.parameters()["box"]
@@ -395,8 +496,7 @@ class Channel:
                 raise ParameterError(
                     f"invalid {name} = {getattr(self, name)!r}: allowed "
                     f"{float(box['length'][i])!r} (the checkpoint's)")
-        prep = f"{os.fspath(checkpoint)}.prep.json"
-        info = json.loads(open(prep).read()) if os.path.exists(prep) else {}
+        info = read_checkpoint_state(checkpoint, "channel")
         self._release(src.get_positions(), np.array(src.core.diameters()),
                       {**info, "branched_from": os.fspath(checkpoint),
                        "branched_at_time": float(src.time)})
@@ -414,10 +514,16 @@ class Channel:
         core.add_sampler("channel_series", self.sample_every)
 
     def _simulation(self) -> Simulation:
-        if self.sim is None:
+        if self._sim is None:
             raise ConfigurationError(
                 "channel not prepared: call prepare() (or run(), or restore()) first")
-        return self.sim
+        return self._sim
+
+    @property
+    def prepared(self) -> bool:
+        """Whether the kernel simulation exists (after :meth:`prepare`, :meth:`run` or
+        :meth:`restore`)."""
+        return self._sim is not None
 
     @property
     def core(self) -> _core.Sim:
@@ -448,15 +554,19 @@ class Channel:
         run_with_checkpoints(self, steps, advance, checkpoint, checkpoint_every)
 
     def tables(self) -> dict[str, pa.Table]:
-        if self.sim is not None:
+        """The sample tables by name (``bins``, ``series``; docs/columns.md)."""
+        if self._sim is not None:
             self._tables.drain(self.core)
         return self._tables.tables()
 
     def load_tables(self, tables: Mapping[str, pa.Table]) -> None:
+        """Start from tables written earlier (a resumed run)."""
         self._tables.load(tables)
 
     def summary(self) -> dict[str, Any]:
-        """The paper's analysis (granflow.analysis.channel.summary) flattened to scalars."""
+        """The paper's analysis (granflow.analysis.channel.summary) flattened to scalars:
+        ``n``, ``state`` (:class:`granflow.states.FlowState`), ``phi_bar_achieved`` and each
+        value with its ``<name>_se``."""
         from granflow.analysis import channel as ach
         from granflow.analysis.channel_profiles import flow_state
 
@@ -465,7 +575,7 @@ class Channel:
                                "phi_bar_achieved": self.prep_info.get("phi_bar_achieved")}
         if "series" in t:
             fs = flow_state(t["series"])
-            out["flow_state"] = fs.state
+            out["state"] = FlowState(fs.state)
         if "bins" not in t or t["bins"].num_rows == 0:
             return out
         try:
@@ -482,22 +592,21 @@ class Channel:
         return out
 
     def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
-        from granflow.io import atomic_path
-
+        """The kernel state and the preparation's record (:func:`write_checkpoint`)."""
         self.prepare()
         # closed windows go to the tables first: the checkpoint carries the open ones
         self._tables.drain(self.core)
-        # the preparation record rides beside the kernel checkpoint (written first: a
-        # checkpoint never exists without it)
-        with atomic_path(f"{os.fspath(path)}.prep.json") as tmp:
-            tmp.write_text(json.dumps(self.prep_info))
-        self._simulation().save_checkpoint(path)
+        write_checkpoint(self, path, self.prep_info, self._simulation())
 
     def restore(self, path: str | os.PathLike[str]) -> None:
+        """The state of a checkpoint written by :meth:`save_checkpoint`."""
+        state = read_checkpoint_state(path, "channel")
         # (the samplers are added before the state is loaded: their open windows ride in it)
-        self.sim = Simulation.from_checkpoint(path, threads=self.threads,
-                                              configure=self._add_samplers)
-        prep = f"{os.fspath(path)}.prep.json"
-        if os.path.exists(prep):
-            with open(prep) as f:
-                self.prep_info = json.load(f)
+        self._sim = Simulation.from_checkpoint(path, threads=self.threads,
+                                               configure=self._add_samplers)
+        self.prep_info = dict(state)
+
+
+def _skin(mat: Material) -> float:
+    """The material's skin, for the geometry checks (unset: the kernel's default)."""
+    return float(mat.skin) if mat.skin is not None else kernel_default_skin()
