@@ -21,7 +21,9 @@ from matplotlib.ticker import NullFormatter
 
 from . import channel as ch
 from . import rheology as rh
-from .stats import SEvsTime, quiet
+from ._numerics import quiet
+from .estimate import Estimate
+from .stats import SEvsTime
 from .tables import TableLike, to_polars
 
 PathLike = str | os.PathLike[str]
@@ -50,7 +52,7 @@ def _as_runs(
 
 def _val(s: Mapping[str, Any], key: str) -> float:
     v = s.get(key, math.nan)
-    return float(v["value"]) if isinstance(v, Mapping) else float(v)
+    return float(v.value) if isinstance(v, Estimate) else float(v)
 
 
 def _zone_lines(ax: Axes, s: Mapping[str, Any]) -> None:
@@ -58,8 +60,8 @@ def _zone_lines(ax: Axes, s: Mapping[str, Any]) -> None:
     if not z:
         return
     ax.axvline(z.get("xi_plug", math.nan), color="black", lw=0.8, ls=":")
-    xa = z.get("xi_ad", {})
-    xa = xa.get("value", math.nan) if isinstance(xa, Mapping) else xa
+    xa = z.get("xi_ad", math.nan)
+    xa = xa.value if isinstance(xa, Estimate) else xa
     if xa is not None and np.isfinite(xa):
         ax.axvline(xa, color="tab:blue", lw=0.8, ls=":")
     ax.axvline(z.get("xi_wall", math.nan), color="tab:red", lw=0.8, ls=":")

@@ -1,0 +1,56 @@
+"""The flow states of a run: one vocabulary for every scene, analysis and campaign.
+
+:class:`FlowState` is a :class:`enum.StrEnum`: a member *is* its string (``FlowState.STEADY ==
+"steady"``, ``str()`` and f-strings give the value), so tables, JSON and the committed datasets
+hold the plain strings and compare equal to the members.
+
+This module is a leaf: it imports nothing from granflow, so every layer can use it.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+__all__ = ["FlowState", "STATIONARY"]
+
+
+class FlowState(StrEnum):
+    """The state of a run, as analysis classifies it and campaigns record it.
+
+    Classified from the data (:mod:`granflow.analysis`):
+
+    * ``STEADY`` ("steady"): channel; the centre-of-mass velocity is stationary and its
+      fluctuation small (:func:`granflow.analysis.channel_profiles.flow_state`).
+    * ``FLUCTUATING`` ("fluctuating"): channel; stationary, but with a relative fluctuation
+      amplitude above the threshold (paper 000's 1-2 % at phi_bar = 0.62). Averaged like
+      ``STEADY``.
+    * ``FLOWING`` ("flowing"): stress-controlled cell; steady shear flow
+      (:func:`granflow.analysis.rheology.classify_run`).
+    * ``ARRESTED`` ("arrested"): channel (the velocity vanishes) and cell (the shear rate is zero
+      within its error): no flow.
+    * ``ACCELERATING`` ("accelerating") / ``DECELERATING`` ("decelerating"): channel and cell;
+      a significant drift, not a steady state.
+
+    Recorded by campaigns (:mod:`granflow.studies`), not classified from data:
+
+    * ``SHORT`` ("short"): too few samples yet to classify the run.
+    * ``RUNAWAY`` ("runaway"): cell; the packing dilated without bound (no steady state under
+      the imposed stresses).
+    * ``FAILED`` ("failed"): the run stopped on another error (an instability).
+    """
+
+    STEADY = "steady"
+    FLUCTUATING = "fluctuating"
+    FLOWING = "flowing"
+    ARRESTED = "arrested"
+    ACCELERATING = "accelerating"
+    DECELERATING = "decelerating"
+    SHORT = "short"
+    RUNAWAY = "runaway"
+    FAILED = "failed"
+
+
+#: states of a statistically stationary flow, averaged as such (channel and cell)
+STATIONARY: frozenset[FlowState] = frozenset(
+    {FlowState.STEADY, FlowState.FLUCTUATING, FlowState.FLOWING}
+)
