@@ -459,6 +459,7 @@ class Channel:
         """The paper's analysis (granflow.analysis.channel.summary) flattened to scalars."""
         from granflow.analysis import channel as ach
         from granflow.analysis.channel_profiles import flow_state
+        from granflow.analysis.estimate import Estimate
 
         t = self.tables()
         out: dict[str, Any] = {"n": self.prep_info.get("n"),
@@ -474,9 +475,8 @@ class Channel:
             out["analysis_error"] = f"{type(exc).__name__}: {exc}"
             return out
         for k, v in s.items():
-            if isinstance(v, dict) and "value" in v:
-                out[k] = v["value"]
-                out[k + "_se"] = v.get("se")
+            if isinstance(v, Estimate):
+                out[k], out[k + "_se"] = v
             elif isinstance(v, (int, float, str, bool)):
                 out[k] = v
         return out
