@@ -277,3 +277,17 @@ def test_channel_plots(run, tmp_path):
     for p in paths:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10000
+
+
+def test_flow_state_vocabulary_keeps_the_committed_strings():
+    import json
+
+    # the strings the committed datasets hold: a member must keep its value
+    assert [s.value for s in FlowState] == [
+        "steady", "fluctuating", "flowing", "arrested", "accelerating", "decelerating",
+        "short", "runaway", "failed"]
+    s = FlowState.FLUCTUATING
+    assert s == "fluctuating" and str(s) == f"{s}" == "fluctuating" and f"{s:>12}".strip() == s
+    assert json.dumps({"state": s}) == '{"state": "fluctuating"}'
+    assert pl.DataFrame([{"state": s}]).schema["state"] == pl.String  # rows: plain strings
+    assert pl.DataFrame({"state": ["fluctuating"]}).filter(pl.col("state") == s).height == 1

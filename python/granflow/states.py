@@ -1,20 +1,22 @@
 """The flow states of a run: one vocabulary for every scene, analysis and campaign.
 
-:class:`FlowState` is a :class:`enum.StrEnum`: a member *is* its string (``FlowState.STEADY ==
-"steady"``, ``str()`` and f-strings give the value), so tables, JSON and the committed datasets
-hold the plain strings and compare equal to the members.
+:class:`FlowState` is a ``str`` enum: a member *is* its string (``FlowState.STEADY ==
+"steady"``; ``str()``, f-strings and JSON give the value), so tables and the committed datasets
+hold the plain strings, which compare equal to the members. (Build a table from row dicts, as
+the campaigns do: polars reads a column given as a list of enum members as its own Enum
+type.)
 
 This module is a leaf: it imports nothing from granflow, so every layer can use it.
 """
 
 from __future__ import annotations
 
-from enum import StrEnum
+from enum import Enum
 
 __all__ = ["FlowState", "STATIONARY"]
 
 
-class FlowState(StrEnum):
+class FlowState(str, Enum):
     """The state of a run, as analysis classifies it and campaigns record it.
 
     Classified from the data (:mod:`granflow.analysis`):
@@ -48,6 +50,13 @@ class FlowState(StrEnum):
     SHORT = "short"
     RUNAWAY = "runaway"
     FAILED = "failed"
+
+    # the value, as a plain string would print (Python's default for a str mixin changed in 3.11)
+    def __str__(self) -> str:
+        return str(self.value)
+
+    def __format__(self, format_spec: str) -> str:
+        return format(str(self.value), format_spec)
 
 
 #: states of a statistically stationary flow, averaged as such (channel and cell)
