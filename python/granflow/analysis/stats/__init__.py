@@ -1,17 +1,18 @@
 """Statistical error of time series, one module per job.
 
-* :mod:`.blocking` — Flyvbjerg-Petersen blocking: the SE of a mean (its conventions and the
+* :mod:`.fp_blocking` — Flyvbjerg-Petersen blocking: the SE of a mean (its conventions and the
   plateau rule are in that module's docstring), of many means at once, of a ratio of means.
 * :mod:`.steady` — the end of the start-up transient (MSER) and the trend test.
 * :mod:`.se_time` — SE against averaging time and its extrapolation.
-* :mod:`.jackknife` — the delete-one-block jackknife.
+* :mod:`.block_jackknife` — the delete-one-block jackknife.
 
 Everything here works on *samples* of a time series (one row per sample of a ``series`` table, or
 one window of a ``bins`` table) and never on particles. A value with its error is an
 :class:`granflow.analysis.estimate.Estimate`.
 """
 
-from .blocking import (
+from .block_jackknife import block_means, choose_blocks, jackknife, jackknife_se
+from .fp_blocking import (
     DEFAULT_ALPHA,
     DEFAULT_MIN_BLOCKS,
     FIT_MIN_BLOCKS,
@@ -24,7 +25,6 @@ from .blocking import (
     mean_se,
     ratio_se,
 )
-from .jackknife import block_means, choose_blocks, jackknife, jackknife_se
 from .se_time import (
     DEFAULT_FRACTIONS,
     SEvsTime,

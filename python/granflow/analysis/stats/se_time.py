@@ -14,7 +14,7 @@ import polars as pl
 
 from .._numerics import quiet
 from ..tables import FloatArray, sample_interval
-from .blocking import DEFAULT_MIN_BLOCKS, blocking
+from .fp_blocking import DEFAULT_MIN_BLOCKS, blocking
 from .steady import steady_state_start
 
 DEFAULT_FRACTIONS: tuple[float, ...] = (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0)

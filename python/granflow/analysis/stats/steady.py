@@ -11,7 +11,7 @@ import numpy.typing as npt
 
 from .._numerics import quiet
 from ..tables import FloatArray
-from .blocking import blocking
+from .fp_blocking import blocking
 
 
 @dataclass
