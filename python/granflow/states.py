@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from enum import Enum
 
-__all__ = ["FlowState", "STATIONARY"]
+__all__ = ["FlowState"]
 
 
 class FlowState(str, Enum):
@@ -58,8 +58,3 @@ class FlowState(str, Enum):
     def __format__(self, format_spec: str) -> str:
         return format(str(self.value), format_spec)
 
-
-#: states of a statistically stationary flow, averaged as such (channel and cell)
-STATIONARY: frozenset[FlowState] = frozenset(
-    {FlowState.STEADY, FlowState.FLUCTUATING, FlowState.FLOWING}
-)

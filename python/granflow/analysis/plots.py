@@ -19,6 +19,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
+from granflow.states import FlowState
+
 from . import channel as ch
 from . import rheology as rh
 from ._numerics import quiet
@@ -240,7 +242,7 @@ def plot_cell_rheology(
     averaged, flowing rows are drawn); ``group`` optionally colours by a parameter column."""
     d = to_polars(runs)
     if "state" in d.columns:
-        d = d.filter(pl.col("state") == "flowing")
+        d = d.filter(pl.col("state") == FlowState.FLOWING)
     panels = [
         ("mu1", 1, "mu1"),
         ("mu2", 2, "mu2"),
