@@ -34,7 +34,7 @@ from typing import Any
 
 import granflow as gf
 import numpy as np
-from granflow.analysis.stats import mean_se
+from granflow.analysis.stats import blocking, mean_se
 from granflow.io import _jsonable, write_lammps_data
 from granflow.material import kernel_default_skin
 from granflow.packing import dense_periodic_packing
@@ -362,7 +362,7 @@ def part_run(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
           f"{'max rel. diff, samples 1-10':>27}")
     for k in g:
         a_g, a_l = np.asarray(g[k]), np.asarray(lm[k])
-        m_g, m_l = mean_se(a_g[1:], every * DT), mean_se(a_l[1:], every * DT)
+        m_g, m_l = blocking(a_g[1:], every * DT), blocking(a_l[1:], every * DT)
         se = math.hypot(m_g.se, m_l.se)
         z = (m_g.mean - m_l.mean) / se if se > 0 else float("nan")
         # samples 1-10 (step 0 differs by the set-up slip convention, see part 'forces')
@@ -522,7 +522,7 @@ def part_shear(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
 
     def stat(col: str) -> tuple[float, float]:
         m = mean_se(np.asarray(s[col][half:]), dts)
-        return m.mean, m.se
+        return m.value, m.se
 
     def invariants(sig: Array) -> tuple[float, float]:
         p = float(np.trace(sig) / 3.0)

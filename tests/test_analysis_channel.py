@@ -9,6 +9,7 @@ import pytest
 from granflow.analysis import channel as ch
 from granflow.analysis import channel_profiles as cp
 from granflow.analysis import plots
+from granflow.states import FlowState
 
 US, UM, DELTA, W = 3.0, 4.2, 8.0, 40.0
 LC, TC, D_PHI, SXX = 11.5, 1e-4, 5.0, 100.0
@@ -99,25 +100,25 @@ def test_velocity_scaling_recovers_31(run):
     s, truth = run
     # (u_slip, u_max) by the paper's definitions: wall-bin and centre-bin velocities
     for key, true in (("u_slip", truth["u"][0]), ("u_max", truth["u"][len(truth["u"]) // 2])):
-        assert abs(s[key]["value"] - true) < 4 * s[key]["se"]
-        assert 0 < s[key]["se"] < 0.005
+        assert abs(s[key].value - true) < 4 * s[key].se
+        assert 0 < s[key].se < 0.005
     # three-parameter fit of (3.1): the generating parameters
     for key, true in (("u_slip_fit", US), ("u_max_fit", UM), ("delta_fit", DELTA)):
-        assert abs(s[key]["value"] - true) < 4 * s[key]["se"], key
-        assert s[key]["se"] < 0.02 * true
+        assert abs(s[key].value - true) < 4 * s[key].se, key
+        assert s[key].se < 0.02 * true
     # delta_0.95 with x from the wall and u_slip at the wall-bin centre: continuous answer
     xi0, xic = 0.75, W / 2
     f = lambda z: 1 - np.exp(-3 * z / DELTA)  # noqa: E731
     target = f(xi0) + 0.95 * (f(xic) - f(xi0))
     d_true = -DELTA / 3 * np.log(1 - target)
-    assert abs(s["delta_095"]["value"] - d_true) < 4 * s["delta_095"]["se"] + 0.05
-    assert s["u_max_over_u_slip"]["value"] == pytest.approx(
-        s["u_max"]["value"] / s["u_slip"]["value"]
+    assert abs(s["delta_095"].value - d_true) < 4 * s["delta_095"].se + 0.05
+    assert s["u_max_over_u_slip"].value == pytest.approx(
+        s["u_max"].value / s["u_slip"].value
     )
-    assert s["residual_fit"]["value"] < 0.005  # (3.1) describes the data
+    assert s["residual_fit"].value < 0.005  # (3.1) describes the data
     # (3.2) against the width-averaged profile (differences: wall-bin offset of u_slip)
-    assert s["mean_velocity_ratio"]["value"] == pytest.approx(1.0, abs=0.01)
-    assert s["mean_velocity"]["value"] == pytest.approx(
+    assert s["mean_velocity_ratio"].value == pytest.approx(1.0, abs=0.01)
+    assert s["mean_velocity"].value == pytest.approx(
         np.mean(ch.velocity_profile_31(np.linspace(0, W / 2, 20001), US, UM, DELTA)), rel=2e-3
     )
 
@@ -134,10 +135,10 @@ def test_zones(run):
     assert all(order[a] <= order[b] for a, b in zip(labels, labels[1:], strict=False))
     # the shear rate is large (>> its SE) for xi < 8, so the plug starts beyond
     assert 8.0 < z["xi_plug"] < W / 2
-    assert abs(z["xi_ad"]["value"] - XI_AD) < 4 * z["xi_ad"]["se"] + 0.1
+    assert abs(z["xi_ad"].value - XI_AD) < 4 * z["xi_ad"].se + 0.1
     plug = np.array([lab == "plug" for lab in labels])
     phi_plug_true = np.mean(phi_profile(xi[plug]))
-    assert abs(z["phi_plug"]["value"] - phi_plug_true) < 4 * z["phi_plug"]["se"] + 1e-5
+    assert abs(z["phi_plug"].value - phi_plug_true) < 4 * z["phi_plug"].se + 1e-5
 
 
 def test_zone_means_weight_bins_by_width():
@@ -169,8 +170,8 @@ def test_fit_phi_ad_recovers_the_divergence():
 def test_conduction_length_and_kinetic_coefficients(run):
     s, truth = run
     lc = s["conduction"]["l_c"]
-    assert abs(lc["value"] - LC) < 3 * lc["se"] + 0.05
-    assert lc["se"] < 0.1 * LC
+    assert abs(lc.value - LC) < 3 * lc.se + 0.05
+    assert lc.se < 0.1 * LC
     p = s["profile"]
     shear = p.filter(pl.col("zone").is_in(["dense", "loose"]))
     # D_phi = Gamma / T^1.5 and p_phi = sigma_xx / T (B8, B10)
@@ -179,8 +180,8 @@ def test_conduction_length_and_kinetic_coefficients(run):
     np.testing.assert_allclose(shear["p_phi"].to_numpy() * shear["T"].to_numpy(), SXX, rtol=0.01)
     # Omega_z / (du_y/dx) = 1/2 in the shearing zones
     om = s["omega_ratio_shearing"]
-    assert abs(om["value"] - 0.5) < 4 * om["se"] and om["se"] < 0.01
-    assert s["sigma_xx_mean"]["value"] == pytest.approx(SXX, rel=1e-3)
+    assert abs(om.value - 0.5) < 4 * om.se and om.se < 0.01
+    assert s["sigma_xx_mean"].value == pytest.approx(SXX, rel=1e-3)
 
 
 def test_mu_I_table(run):
@@ -219,7 +220,8 @@ def test_B3_B4_and_model_curves():
 )
 def test_flow_state(kind):
     fs = cp.flow_state(synthetic_series(kind))
-    assert fs.state == kind
+    assert fs.state is FlowState(kind)  # a member of the one vocabulary, equal to its string
+    assert fs.state == kind and f"{fs.state}" == kind
     assert fs.is_steady == (kind in ("steady", "fluctuating"))
 
 
@@ -244,11 +246,11 @@ def test_summary_input_types_and_series():
     s2 = ch.summary(pl.from_arrow(tab), pl.DataFrame(ser), start_time=0.0)
     s3 = ch.summary({c: tab.column(c).to_numpy() for c in tab.column_names}, ser, start_time=0.0)
     for s in (s2, s3):
-        assert s["u_slip"]["value"] == pytest.approx(s1["u_slip"]["value"])
-        assert s["delta_fit"]["se"] == pytest.approx(s1["delta_fit"]["se"])
+        assert s["u_slip"].value == pytest.approx(s1["u_slip"].value)
+        assert s["delta_fit"].se == pytest.approx(s1["delta_fit"].se)
     assert s1["flow_state"]["state"] == "steady"
-    assert s1["wall_friction"]["value"] == pytest.approx(0.3, abs=4 * s1["wall_friction"]["se"])
-    assert s1["vcm"]["value"] == pytest.approx(3.0, abs=0.01)
+    assert s1["wall_friction"].value == pytest.approx(0.3, abs=4 * s1["wall_friction"].se)
+    assert s1["vcm"].value == pytest.approx(3.0, abs=0.01)
 
 
 def test_unfolded_profile_uses_wall0_half():
@@ -275,3 +277,17 @@ def test_channel_plots(run, tmp_path):
     for p in paths:
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10000
+
+
+def test_flow_state_vocabulary_keeps_the_committed_strings():
+    import json
+
+    # the strings the committed datasets hold: a member must keep its value
+    assert [s.value for s in FlowState] == [
+        "steady", "fluctuating", "flowing", "arrested", "accelerating", "decelerating",
+        "short", "runaway", "failed"]
+    s = FlowState.FLUCTUATING
+    assert s == "fluctuating" and str(s) == f"{s}" == "fluctuating" and f"{s:>12}".strip() == s
+    assert json.dumps({"state": s}) == '{"state": "fluctuating"}'
+    assert pl.DataFrame([{"state": s}]).schema["state"] == pl.String  # rows: plain strings
+    assert pl.DataFrame({"state": ["fluctuating"]}).filter(pl.col("state") == s).height == 1

@@ -11,6 +11,7 @@ import pyarrow as pa
 import pytest
 from granflow.analysis import plots
 from granflow.analysis import rheology as rh
+from granflow.states import FlowState
 from scipy.signal import lfilter
 
 # paper values for mu_s = 0.3 (Table 1 A's and the exponents / offsets quoted in the text)
@@ -99,7 +100,7 @@ def test_fit_law_with_x_errors_and_bad_points():
 
 def test_classify_and_analyse_run():
     st = rh.classify_run(cell_series(0.01, "flowing"))
-    assert st.state == "flowing" and st.averaged and st.shear_component == "L_xy"
+    assert st.state is FlowState.FLOWING and st.averaged and st.shear_component == "L_xy"
     assert st.shear_mean > 10 * st.shear_se
     assert rh.classify_run(pa.table(cell_series(0.01, "arrested"))).state == "arrested"
     acc = rh.classify_run(pl.DataFrame(cell_series(0.01, "accelerating")))
@@ -124,6 +125,7 @@ def test_collect_runs_and_fit_through_the_pipeline():
     df = rh.collect_runs(runs)
     assert df.height == 14
     assert df["state"].to_list() == ["flowing"] * 12 + ["accelerating", "arrested"]
+    assert df.schema["state"] == pl.String  # a table holds the state's plain string
     assert df.filter(pl.col("state") == "accelerating")["mu1"].is_null().all()
     assert {"mu1", "mu1_se", "mu1_tau", "I_se", "n_unconverged", "T_avg"} <= set(df.columns)
     flowing = df.filter(pl.col("state") == "flowing")

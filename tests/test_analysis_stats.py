@@ -47,14 +47,15 @@ def test_blocking_short_correlated_series_is_not_converged():
     x = ar1(0.99, 256, seed=3)  # tau ~ 100 samples: far too short
     b = S.blocking(x)
     assert not b.converged
-    mean, se, tau, converged, n = S.mean_se(x)
-    assert converged is False and n == 256 and se == pytest.approx(b.se)
+    assert b.n == 256
+    value, se = S.mean_se(x)  # an Estimate: the blocking's mean and SE
+    assert value == b.mean and se == b.se
 
 
 def test_uncorrelated_series():
     rng = np.random.default_rng(5)
     x = rng.normal(size=4000)
-    res = S.mean_se(x, dt=2.0)
+    res = S.blocking(x, dt=2.0)
     assert res.converged
     assert abs(res.se * np.sqrt(4000) - 1.0) < 0.1
     assert abs(res.tau - 1.0) < 0.3  # dt / 2
@@ -78,7 +79,7 @@ def test_ratio_se_linearisation():
     b = 4.0 + 0.1 * rng.normal(size=20000)
     r = S.ratio_se(a, b)
     se_delta = 0.5 * np.sqrt((0.1 / 2) ** 2 + (0.1 / 4) ** 2) / np.sqrt(20000)
-    assert r.mean == pytest.approx(0.5, abs=4 * se_delta)
+    assert r.value == pytest.approx(0.5, abs=4 * se_delta)
     assert abs(r.se / se_delta - 1) < 0.15
 
 
@@ -89,7 +90,7 @@ def test_steady_state_start_skips_transient():
     st = S.steady_state_start(t, x)
     assert st.settled
     assert 100.0 < st.t_start < 600.0
-    steady = S.mean_se(x[st.index :])
+    steady = S.blocking(x[st.index :])
     # the transient biases the plain average by ~0.12, 8x the error of the stationary noise
     assert abs(np.mean(x)) > 4 / np.sqrt(x.size)
     assert abs(steady.mean) < 4 * steady.se and steady.converged
@@ -211,3 +212,18 @@ def test_time_to_reach_agrees_with_the_measured_error():
     target = 0.5 * se_last
     need = res.time_to_reach(target)
     assert need["T"] >= (se_last / target) ** 2 * T_last * (1 - 1e-9)
+
+
+def test_steady_state_start_of_several_observables_is_the_latest():
+    rng = np.random.default_rng(11)
+    t = np.arange(3000.0)
+    fast = 3.0 * np.exp(-t / 20.0) + rng.normal(size=t.size)
+    slow = 3.0 * np.exp(-t / 200.0) + rng.normal(size=t.size)
+    one = {k: S.steady_state_start(t, v) for k, v in (("fast", fast), ("slow", slow))}
+    both = S.steady_state_start(t, {"fast": fast, "slow": slow})
+    assert one["slow"].index > one["fast"].index
+    assert (both.index, both.t_start) == (one["slow"].index, one["slow"].t_start)
+    assert both.settled == (one["fast"].settled and one["slow"].settled)
+    assert both.criterion.endswith("latest over fast, slow")
+    with pytest.raises(ValueError):
+        S.steady_state_start(t, {})

@@ -399,3 +399,15 @@ def test_jop_fit_is_read_with_its_covariance():
     assert np.array_equal(LocalLaw.mu_covariance(c, jop=False), c)
     draws = law.sample(t, np.diag([1e-6, 1e-6, 1e-4]), 5, rng=1)
     assert all(d.mu_form == "jop" for d in draws)
+
+
+def test_law_forms_have_one_home_shared_with_the_fits():
+    # the continuum's mu(I), phi(I) and the fits' (4.2), (4.7) and Jop forms: the same bits
+    from granflow.analysis import rheology as rh
+
+    inum = np.concatenate([[0.0], np.geomspace(1e-6, 0.5, 200)])
+    law = LocalLaw(0.38, 0.55, 0.7, 0.6, 0.3, 0.9, 1e-4, 0.5)
+    assert np.array_equal(law.mu(inum), rh.law_value("mu1", inum, 0.38, 0.55, 0.7))
+    assert np.array_equal(law.phi(inum), rh.law_value("phi", inum, 0.6, 0.3, 0.9))
+    jop = LocalLaw(0.36, 0.9 - 0.36, 0.02, 0.6, 0.3, 0.9, 1e-4, 0.5, mu_form="jop")
+    assert np.array_equal(jop.mu(inum), rh.jop_value(inum, 0.36, 0.9, 0.02))

@@ -1,5 +1,7 @@
 """The package's layout: imports run one way (the module import graph of python/granflow is
-acyclic), every module imports on its own, and module docstrings carry no issue numbers."""
+acyclic, and the layers import only downwards: scenes never import studies; analysis never imports
+scenes, studies or the continuum models; granflow.states imports nothing of granflow), every
+module imports on its own, and module docstrings carry no issue numbers."""
 
 from __future__ import annotations
 
@@ -13,23 +15,23 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "python" / "granflow"
 
 
-def _module_name(path: Path) -> str:
-    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+def _module_name(path: Path, pkg: Path = PKG) -> str:
+    parts = list(path.relative_to(pkg.parent).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
 
 
-def _modules() -> dict[str, Path]:
-    return {_module_name(p): p for p in sorted(PKG.rglob("*.py"))}
+def _modules(pkg: Path = PKG) -> dict[str, Path]:
+    return {_module_name(p, pkg): p for p in sorted(pkg.rglob("*.py"))}
 
 
-def import_graph() -> dict[str, set[str]]:
-    """module -> the granflow modules it imports (anywhere in the file, function bodies
-    included: a lazy import closes a circle as well)."""
-    mods = _modules()
+def import_graph(pkg: Path = PKG) -> dict[str, set[str]]:
+    """module -> the package's modules it imports (anywhere in the file, function bodies
+    included: a lazy import closes a circle, and crosses a layer, as well)."""
+    mods = _modules(pkg)
     # submodules without Python source (the extension, known by its stub) are leaves
-    known = set(mods) | {_module_name(p) for p in PKG.rglob("*.pyi")}
+    known = set(mods) | {_module_name(p, pkg) for p in pkg.rglob("*.pyi")}
     graph: dict[str, set[str]] = {m: set() for m in mods}
     for mod, path in mods.items():
         is_pkg = path.name == "__init__.py"
@@ -77,6 +79,76 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
             if found:
                 return found
     return None
+
+
+#: layer -> the layers it must not import (a layer is a module and everything below it)
+FORBIDDEN: dict[str, tuple[str, ...]] = {
+    "granflow.scenes": ("granflow.studies",),
+    "granflow.analysis": ("granflow.scenes", "granflow.studies", "granflow.continuum",
+                          "granflow.runner", "granflow.cli"),
+    "granflow.continuum": ("granflow.scenes", "granflow.studies"),
+    "granflow.states": ("granflow",),  # a leaf
+}
+
+
+def _within(mod: str, layer: str) -> bool:
+    return mod == layer or mod.startswith(layer + ".")
+
+
+def layer_violations(graph: dict[str, set[str]],
+                     forbidden: dict[str, tuple[str, ...]] = FORBIDDEN) -> list[str]:
+    """Every import ``a -> b`` of ``graph`` where ``a``'s layer must not import ``b``'s."""
+    out = []
+    for mod, targets in sorted(graph.items()):
+        for layer, banned in forbidden.items():
+            if not _within(mod, layer):
+                continue
+            out += [f"{mod} -> {t}" for t in sorted(targets)
+                    if any(_within(t, b) for b in banned) and not _within(t, layer)]
+    return out
+
+
+def _synthetic_package(root: Path, files: dict[str, str]) -> Path:
+    pkg = root / "granflow"
+    for rel, text in files.items():
+        f = pkg / rel
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_text(text)
+    return pkg
+
+
+def test_layer_rules_catch_a_violation(tmp_path):
+    # a synthetic package breaking each rule once, at module level and inside a function
+    pkg = _synthetic_package(tmp_path, {
+        "__init__.py": "",
+        "states.py": "import granflow.errors\n",
+        "errors.py": "",
+        "scenes/__init__.py": "",
+        "scenes/channel.py": "def f():\n    from ..studies import run\n",
+        "studies/__init__.py": "",
+        "studies/run.py": "from granflow.scenes import channel\n",
+        "analysis/__init__.py": "from . import stats\n",
+        "analysis/stats.py": "from granflow.scenes.channel import f\n",
+        "analysis/report.py": "def g():\n    import granflow.studies.run\n",
+    })
+    g = import_graph(pkg)
+    assert layer_violations(g) == [
+        "granflow.analysis.report -> granflow.studies.run",
+        "granflow.analysis.stats -> granflow.scenes.channel",
+        "granflow.scenes.channel -> granflow.studies.run",
+        "granflow.states -> granflow.errors",
+    ]
+    # ... and the circle the lazy import closes (scenes.channel -> studies.run -> scenes.channel)
+    assert find_cycle(g) == ["granflow.scenes.channel", "granflow.studies.run",
+                             "granflow.scenes.channel"]
+    # the allowed direction is no violation
+    assert layer_violations({"granflow.studies.run": {"granflow.scenes.channel"},
+                             "granflow.scenes.channel": {"granflow.analysis.stats"}}) == []
+
+
+def test_layers_import_downwards():
+    bad = layer_violations(import_graph())
+    assert not bad, "imports against the layer order: " + "; ".join(bad)
 
 
 def test_cycle_finder_finds_circles():

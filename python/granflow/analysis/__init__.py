@@ -1,8 +1,10 @@
 """Pure-Python analysis of granflow output tables (docs/columns.md).
 
 * :mod:`.tables` — column access for any table type (pyarrow, polars, mappings), ``to_polars``.
+* :mod:`.estimate` — :class:`Estimate`, a value with its standard error (the one such type).
 * :mod:`.stats` — Flyvbjerg-Petersen blocking, means and ratios with SEs, trend test,
   steady-state detection, SE against run time, jackknife over blocks.
+* :mod:`.laws` — the forms of the flow laws mu(I), phi(I) (fits and continuum models).
 * :mod:`.binned` — binned profiles: window x bin matrices, whole-profile SEs.
 * :mod:`.channel_profiles` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran
   2022): flow state and steady profiles with jackknife SEs.
@@ -11,9 +13,11 @@
 * :mod:`.report` — SE of a run's key figures against averaging and wall time.
 * :mod:`.plots` — the papers' figures, error / work-precision plots and a run directory's
   figures (PNG).
+
+Flow states are :class:`granflow.states.FlowState` members.
 """
 
-from . import binned, channel, channel_profiles, plots, rheology, stats, tables
+from . import binned, channel, channel_profiles, estimate, laws, plots, rheology, stats, tables
 from .binned import ProfileErrors, profile_se, profile_se_vs_time
 from .channel import (
     Zones,
@@ -27,7 +31,8 @@ from .channel import (
     velocity_scaling,
     zones,
 )
-from .channel_profiles import ChannelProfiles, Estimate, FlowState, flow_state, profiles
+from .channel_profiles import ChannelProfiles, ChannelState, flow_state, profiles
+from .estimate import Estimate
 from .plots import (
     plot_cell_rheology,
     plot_channel_fields,
@@ -38,9 +43,10 @@ from .plots import (
     plot_work_precision,
 )
 from .rheology import (
+    CellState,
     FitResult,
-    RunResult,
-    RunState,
+    FlowLaw,
+    RunAnalysis,
     analyse_run,
     classify_run,
     collect_runs,
@@ -57,7 +63,6 @@ from .rheology import (
 )
 from .stats import (
     BlockingResult,
-    MeanSE,
     SEvsTime,
     SteadyStart,
     blocking,
@@ -73,13 +78,15 @@ __all__ = [
     "binned",
     "channel",
     "channel_profiles",
+    "estimate",
+    "laws",
     "plots",
     "rheology",
     "stats",
     "tables",
     # tables, stats, binned
     "BlockingResult",
-    "MeanSE",
+    "Estimate",
     "ProfileErrors",
     "SEvsTime",
     "SteadyStart",
@@ -95,8 +102,7 @@ __all__ = [
     "to_polars",
     # channel
     "ChannelProfiles",
-    "Estimate",
-    "FlowState",
+    "ChannelState",
     "Zones",
     "conduction_length",
     "flow_state",
@@ -110,9 +116,10 @@ __all__ = [
     "velocity_scaling",
     "zones",
     # rheology
+    "CellState",
     "FitResult",
-    "RunResult",
-    "RunState",
+    "FlowLaw",
+    "RunAnalysis",
     "analyse_run",
     "classify_run",
     "collect_runs",

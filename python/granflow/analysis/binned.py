@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 import polars as pl
 
+from ._numerics import quiet
 from .stats import (
     DEFAULT_FRACTIONS,
     DEFAULT_MIN_BLOCKS,
@@ -21,7 +22,6 @@ from .stats import (
     blocking_many,
     prefix_lengths,
     prefix_row,
-    quiet,
     se_table_result,
     steady_state_start,
 )

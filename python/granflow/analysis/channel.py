@@ -25,17 +25,17 @@ import numpy.typing as npt
 import polars as pl
 from scipy import optimize
 
+from ._numerics import quiet
 from .binned import bin_matrix, profile_se
 from .channel_profiles import (
     ChannelProfiles,
-    Estimate,
     flow_state,
     profiles,
 )
+from .estimate import Estimate
 from .stats import (
     jackknife_se,
     mean_se,
-    quiet,
     ratio_se,
 )
 from .tables import FloatArray, TableLike, column, column_names, sample_interval
@@ -487,7 +487,7 @@ def wall_friction(series: TableLike, t_start: float) -> Estimate:
         np.sign(np.mean(cols[f"wall{w}_sigma_xx"])) * cols[f"wall{w}_sigma_xx"] for w in (0, 1)
     )
     r = ratio_se(num, den, sample_interval(t[keep]))
-    return Estimate(abs(r.mean), r.se)
+    return Estimate(abs(r.value), r.se)
 
 
 @quiet
@@ -505,7 +505,7 @@ def summary(
 ) -> dict[str, Any]:
     """Everything of paper 000 §3 for one run, with standard errors.
 
-    Keys (scalars are ``{"value", "se"}`` dicts):
+    Keys (a scalar with its error is an :class:`~granflow.analysis.estimate.Estimate`):
 
     * ``flow_state`` (dict, from ``series``), ``steady`` (t_start, n_windows, n_blocks,
       block_len, folded, W);
@@ -534,8 +534,8 @@ def summary(
         t = column(series, "t")
         keep = t >= prof.t_start
         ms = mean_se(np.abs(column(series, "vcm_y"))[keep], sample_interval(t[keep]))
-        out["vcm"] = {"value": ms.mean, "se": ms.se, "tau": ms.tau, "converged": ms.converged}
-        out["wall_friction"] = wall_friction(series, prof.t_start).as_dict()
+        out["vcm"] = ms
+        out["wall_friction"] = wall_friction(series, prof.t_start)
     out["steady"] = {
         "t_start": prof.t_start,
         "n_windows": prof.n_windows,
@@ -545,24 +545,22 @@ def summary(
         "W": prof.W,
     }
     for k, v in velocity_scaling(prof).items():
-        out[k] = v.as_dict()
+        out[k] = v
     sv, ss = prof.estimate(lambda q: float(np.mean(q["sigma_xx"])))
-    out["sigma_xx_mean"] = {"value": float(sv), "se": float(ss)}
+    out["sigma_xx_mean"] = Estimate(float(sv), float(ss))
     sxx = prof.derived()["sigma_xx"]
     out["sigma_xx_rel_spread"] = float(np.nanmax(np.abs(sxx - sv)) / abs(sv)) if sv else np.nan
     zn = zones(prof, phi_ad=phi_ad, wall_width=wall_width)
     out["zones"] = {
         "xi_wall": zn.xi_wall,
-        "xi_ad": zn.xi_ad.as_dict(),
+        "xi_ad": zn.xi_ad,
         "xi_plug": zn.xi_plug,
-        "phi_plug": zn.phi_plug.as_dict(),
+        "phi_plug": zn.phi_plug,
         "labels": zn.labels,
     }
-    out["omega_ratio_shearing"] = omega_ratio_in_zones(prof, zn).as_dict()
+    out["omega_ratio_shearing"] = omega_ratio_in_zones(prof, zn)
     cond = conduction_length(prof, zn)
-    out["conduction"] = {
-        k: (v.as_dict() if isinstance(v, Estimate) else v) for k, v in cond.items()
-    }
+    out["conduction"] = dict(cond)
     out["profile"] = prof.table().with_columns(pl.Series("zone", zn.labels))
     out["rheology"] = rheology_table(prof, zn)
     bm = bin_matrix(bins, ["u_y"])

@@ -29,6 +29,9 @@ from typing import Any
 import numpy as np
 import polars as pl
 
+from granflow.states import FlowState
+
+from ._numerics import quiet
 from .binned import BinMatrix, bin_matrix, window_steady_start
 from .stats import (
     SteadyStart,
@@ -36,7 +39,6 @@ from .stats import (
     blocking,
     choose_blocks,
     jackknife_se,
-    quiet,
     steady_state_start,
     trend,
 )
@@ -63,8 +65,9 @@ _ANTISYMMETRIC = {"du_y_dx", "w_z", "sigma_xy"}
 # flow state from the centre-of-mass velocity
 # --------------------------------------------------------------------------------------------
 @dataclass
-class FlowState:
-    """Classification of the centre-of-mass velocity series.
+class ChannelState:
+    """Classification of the centre-of-mass velocity series: ``state`` a
+    :class:`granflow.states.FlowState`.
 
     The last ``tail_fraction`` of the series is examined; ``v = |vcm_y|`` along the flow.
 
@@ -80,7 +83,7 @@ class FlowState:
     4. ``steady`` otherwise.
     """
 
-    state: str
+    state: FlowState
     v_mean: float
     v_std: float
     rel_amplitude: float
@@ -94,7 +97,7 @@ class FlowState:
     @property
     def is_steady(self) -> bool:
         """True for 'steady' and 'fluctuating' (a statistically stationary flow)."""
-        return self.state in ("steady", "fluctuating")
+        return self.state in (FlowState.STEADY, FlowState.FLUCTUATING)
 
 
 @quiet
@@ -110,9 +113,10 @@ def flow_state(
     accel_fraction: float = 0.01,
     max_rel_drift: float = 0.05,
     t_sig: float = 3.0,
-) -> FlowState:
-    """Classify a channel run as 'steady', 'fluctuating', 'arrested', 'accelerating' or
-    'decelerating' from its centre-of-mass velocity (criteria in :class:`FlowState`).
+) -> ChannelState:
+    """Classify a channel run as steady, fluctuating, arrested, accelerating or decelerating
+    (a :class:`granflow.states.FlowState`) from its centre-of-mass velocity (criteria in
+    :class:`ChannelState`).
 
     Parameters
     ----------
@@ -123,7 +127,7 @@ def flow_state(
     g, d
         Gravity and particle diameter (velocity scale ``sqrt(g d)``).
     v_arrest, max_rel_amplitude, accel_fraction, max_rel_drift, t_sig
-        Thresholds (see :class:`FlowState`).
+        Thresholds (see :class:`ChannelState`).
     """
     t = column(series, "t")
     v = np.abs(column(series, column_name))
@@ -142,18 +146,18 @@ def flow_state(
     p5, p95 = np.percentile(vv, [5, 95]) if vv.size else (np.nan, np.nan)
     amp = float((p95 - p5) / (2.0 * vmean)) if vmean > 0 else np.inf
     if vv.size == 0:
-        state = "arrested"
+        state = FlowState.ARRESTED
     elif float(np.max(vv)) < thr["v_arrest"]:
-        state = "arrested"
+        state = FlowState.ARRESTED
     elif abs(tr.t_stat) > t_sig and (
         abs(tr.slope) > thr["accel"] or abs(tr.rel_drift) > max_rel_drift
     ):
-        state = "accelerating" if tr.slope > 0 else "decelerating"
+        state = FlowState.ACCELERATING if tr.slope > 0 else FlowState.DECELERATING
     elif amp > max_rel_amplitude:
-        state = "fluctuating"
+        state = FlowState.FLUCTUATING
     else:
-        state = "steady"
-    return FlowState(
+        state = FlowState.STEADY
+    return ChannelState(
         state,
         vmean,
         float(np.std(vv)) if vv.size else np.nan,
@@ -171,18 +175,6 @@ def flow_state(
 
 # profiles with jackknife errors
 # --------------------------------------------------------------------------------------------
-@dataclass
-class Estimate:
-    """A value with its standard error."""
-
-    value: float
-    se: float
-
-    def as_dict(self) -> dict[str, float]:
-        """``{"value": ..., "se": ...}``."""
-        return {"value": float(self.value), "se": float(self.se)}
-
-
 @dataclass
 class ChannelProfiles:
     """Window-averaged channel profiles of the steady part, with jackknife machinery.
@@ -292,17 +284,22 @@ class ChannelProfiles:
         return self._cache["table"]
 
 
+def channel_steady_start(bm: BinMatrix, series: TableLike | None) -> SteadyStart:
+    """The channel's steady start (the one rule, :func:`granflow.analysis.stats.steady_state_start`
+    on the channel's observable): MSER on ``|vcm_y|`` of ``series`` where it has that column,
+    else on the per-window mean velocity of the bins (:func:`.binned.window_steady_start`)."""
+    if series is not None and "vcm_y" in column_names(series):
+        return steady_state_start(column(series, "t"), np.abs(column(series, "vcm_y")))
+    return window_steady_start(bm, "u_y")
+
+
 def _steady_windows(
     bm: BinMatrix, series: TableLike | None, start_time: float | None
 ) -> tuple[float, SteadyStart | None]:
-    """Start time of the steady part: given, else from vcm_y of ``series``, else from the
-    per-window mean velocity of the bins."""
+    """Start time of the steady part: given, else :func:`channel_steady_start`."""
     if start_time is not None:
         return float(start_time), None
-    if series is not None and "vcm_y" in column_names(series):
-        ss = steady_state_start(column(series, "t"), np.abs(column(series, "vcm_y")))
-        return ss.t_start, ss
-    ss = window_steady_start(bm, "u_y")
+    ss = channel_steady_start(bm, series)
     return ss.t_start, ss
 
 

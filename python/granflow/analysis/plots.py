@@ -19,9 +19,13 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import NullFormatter
 
+from granflow.states import FlowState
+
 from . import channel as ch
 from . import rheology as rh
-from .stats import SEvsTime, quiet
+from ._numerics import quiet
+from .estimate import Estimate
+from .stats import SEvsTime
 from .tables import TableLike, to_polars
 
 PathLike = str | os.PathLike[str]
@@ -50,7 +54,7 @@ def _as_runs(
 
 def _val(s: Mapping[str, Any], key: str) -> float:
     v = s.get(key, math.nan)
-    return float(v["value"]) if isinstance(v, Mapping) else float(v)
+    return float(v.value) if isinstance(v, Estimate) else float(v)
 
 
 def _zone_lines(ax: Axes, s: Mapping[str, Any]) -> None:
@@ -58,8 +62,8 @@ def _zone_lines(ax: Axes, s: Mapping[str, Any]) -> None:
     if not z:
         return
     ax.axvline(z.get("xi_plug", math.nan), color="black", lw=0.8, ls=":")
-    xa = z.get("xi_ad", {})
-    xa = xa.get("value", math.nan) if isinstance(xa, Mapping) else xa
+    xa = z.get("xi_ad", math.nan)
+    xa = xa.value if isinstance(xa, Estimate) else xa
     if xa is not None and np.isfinite(xa):
         ax.axvline(xa, color="tab:blue", lw=0.8, ls=":")
     ax.axvline(z.get("xi_wall", math.nan), color="tab:red", lw=0.8, ls=":")
@@ -238,7 +242,7 @@ def plot_cell_rheology(
     averaged, flowing rows are drawn); ``group`` optionally colours by a parameter column."""
     d = to_polars(runs)
     if "state" in d.columns:
-        d = d.filter(pl.col("state") == "flowing")
+        d = d.filter(pl.col("state") == FlowState.FLOWING)
     panels = [
         ("mu1", 1, "mu1"),
         ("mu2", 2, "mu2"),

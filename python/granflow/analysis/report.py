@@ -30,10 +30,10 @@ Figures
 
 The steady part starts where MSER puts it on ``|vcm_y|`` of the ``series`` table (or on the
 per-window mean ``u_y`` without a series), as in
-:func:`granflow.analysis.channel_profiles.profiles`.
+:func:`granflow.analysis.channel_profiles.channel_steady_start`.
 
 ``cell`` (paper 002, ``series`` table): ``mu1``, ``mu2``, ``mu3``, ``phi``, ``I``, each blocked
-directly; the steady part starts at :func:`granflow.analysis.rheology.steady_start`.
+directly; the steady part starts at :func:`granflow.analysis.rheology.cell_steady_start`.
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ import pyarrow.parquet as pq
 
 from . import channel as ch
 from . import channel_profiles as cp
-from .binned import bin_matrix, profile_se_vs_time, window_steady_start
+from ._numerics import quiet
+from .binned import bin_matrix, profile_se_vs_time
 from .stats import (
     DEFAULT_FRACTIONS,
     DEFAULT_MIN_BLOCKS,
@@ -61,10 +62,8 @@ from .stats import (
     blocking,
     prefix_lengths,
     prefix_row,
-    quiet,
     se_table_result,
     se_vs_time,
-    steady_state_start,
 )
 from .tables import FloatArray, column, column_names, sample_interval
 
@@ -322,10 +321,7 @@ def _channel_report(
         raise ValueError("bins table needs a u_y column")
     tw = bm.t0 if np.all(np.isfinite(bm.t0)) else bm.t_mid
     if start_time is None:
-        if series is not None and "vcm_y" in column_names(series):
-            ss = steady_state_start(column(series, "t"), np.abs(column(series, "vcm_y")))
-        else:
-            ss = window_steady_start(bm, "u_y")
+        ss = cp.channel_steady_start(bm, series)
         start_time = ss.t_start
         if not ss.settled:
             notes.append("steady start at the edge of the MSER search range: the transient "
@@ -377,7 +373,7 @@ def _cell_report(
     min_blocks: int,
     start_time: float | None,
 ) -> tuple[dict[str, SEvsTime], dict[str, float], float, list[str]]:
-    from .rheology import classify_run, steady_start
+    from .rheology import cell_steady_start, classify_run
 
     if "series" not in tables:
         raise ValueError("cell error report needs the 'series' table")
@@ -385,7 +381,7 @@ def _cell_report(
     t = column(series, "t")
     notes: list[str] = []
     if start_time is None:
-        ss = steady_start(series)
+        ss = cell_steady_start(series)
         start = ss.index
         if not ss.settled:
             notes.append("steady start at the edge of the MSER search range: the transient "

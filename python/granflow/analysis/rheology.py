@@ -22,14 +22,17 @@ import numpy.typing as npt
 import polars as pl
 from scipy import optimize
 
+from granflow.states import FlowState
+
+from ._numerics import quiet
+from .laws import jop_law, power_law
 from .stats import (
     DEFAULT_MIN_BLOCKS,
     SteadyStart,
     Trend,
     blocking,
     blocking_many,
-    quiet,
-    steady_state_start_multi,
+    steady_state_start,
     trend,
 )
 from .tables import FloatArray, TableLike, column, column_names, sample_interval, to_polars
@@ -86,8 +89,9 @@ DEFAULT_TABLE1_PATH = (
 
 
 @dataclass(frozen=True)
-class LawSpec:
-    """Flow law ``y = c0 + sign * A * (I^x_power)^a``."""
+class FlowLaw:
+    """A flow law of 002 §4, ``y = c0 + sign * A * (I^x_power)^a``
+    (:func:`granflow.analysis.laws.power_law`)."""
 
     y: str
     params: tuple[str, str, str]
@@ -97,11 +101,11 @@ class LawSpec:
 
 
 #: The four flow laws of 002 §4.
-LAWS: dict[str, LawSpec] = {
-    "mu1": LawSpec("mu1", ("mu1_0", "A1", "a1"), 1, +1.0, "(4.2) mu1 = mu1_0 + A1 I^a1"),
-    "mu2": LawSpec("mu2", ("mu2_0", "A2", "a2"), 2, +1.0, "(4.4) mu2 = mu2_0 + A2 (I^2)^a2"),
-    "mu3": LawSpec("mu3", ("mu3_0", "A3", "a3"), 2, -1.0, "(4.6) mu3 = mu3_0 - A3 (I^2)^a3"),
-    "phi": LawSpec("phi", ("phi_0", "A4", "a4"), 1, -1.0, "(4.7) phi = phi_0 - A4 I^a4"),
+LAWS: dict[str, FlowLaw] = {
+    "mu1": FlowLaw("mu1", ("mu1_0", "A1", "a1"), 1, +1.0, "(4.2) mu1 = mu1_0 + A1 I^a1"),
+    "mu2": FlowLaw("mu2", ("mu2_0", "A2", "a2"), 2, +1.0, "(4.4) mu2 = mu2_0 + A2 (I^2)^a2"),
+    "mu3": FlowLaw("mu3", ("mu3_0", "A3", "a3"), 2, -1.0, "(4.6) mu3 = mu3_0 - A3 (I^2)^a3"),
+    "phi": FlowLaw("phi", ("phi_0", "A4", "a4"), 1, -1.0, "(4.7) phi = phi_0 - A4 I^a4"),
 }
 
 
@@ -111,7 +115,7 @@ def law_value(law: str, I: npt.ArrayLike, c0: float, A: float, a: float) -> Floa
     (4.6) ``mu3_0 - A3 (I^2)^a3`` or (4.7) ``phi_0 - A4 I^a4``."""
     spec = LAWS[law]
     x = np.asarray(I, dtype=np.float64) ** spec.x_power
-    return c0 + spec.sign * A * x**a
+    return power_law(x, c0, A, a, spec.sign)
 
 
 @quiet
@@ -220,8 +224,9 @@ def gradient_frame(series: TableLike) -> pl.DataFrame:
 
 
 @dataclass
-class RunState:
-    """Flow / arrest classification of one cell run.
+class CellState:
+    """Flow / arrest classification of one cell run: ``state`` a
+    :class:`granflow.states.FlowState`.
 
     * ``arrested``: every off-diagonal velocity-gradient component L_xy ... L_zy has a mean
       over the steady part that is zero within ``z_arrest`` (default 3, six components are
@@ -237,7 +242,7 @@ class RunState:
     steady start at the edge of its search range.
     """
 
-    state: str
+    state: FlowState
     averaged: bool
     settled: bool
     t_start: float
@@ -249,17 +254,18 @@ class RunState:
 
 
 @quiet
-def steady_start(
+def cell_steady_start(
     series: TableLike, key_columns: Sequence[str] = KEY_COLUMNS, **kwargs: Any
 ) -> SteadyStart:
-    """Steady start of a cell run: the latest MSER start (stats.steady_state_start) over the
-    key observables present (default shear_rate, phi, p, mu1)."""
+    """The cell's steady start (the one rule, :func:`granflow.analysis.stats.steady_state_start`
+    on the cell's observables): the latest MSER start over the key observables present
+    (default shear_rate, phi, p, mu1)."""
     t = column(series, "t")
     names = column_names(series)
     cols = {k: column(series, k) for k in key_columns if k in names}
     if not cols:
         cols = {c: column(series, c) for c in observable_columns(series)[:1]}
-    return steady_state_start_multi(t, cols, **kwargs)
+    return steady_state_start(t, cols, **kwargs)
 
 
 @quiet
@@ -271,13 +277,13 @@ def classify_run(
     t_sig: float = 3.0,
     max_rel_drift: float = 0.1,
     rate_floor: float = 0.0,
-) -> RunState:
-    """Classify a cell run as 'flowing', 'arrested', 'accelerating' or 'decelerating'
-    (criteria in :class:`RunState`)."""
+) -> CellState:
+    """Classify a cell run as flowing, arrested, accelerating or decelerating (a
+    :class:`granflow.states.FlowState`; criteria in :class:`CellState`)."""
     t = column(series, "t")
     names = column_names(series)
     if start is None:
-        ss = steady_start(series)
+        ss = cell_steady_start(series)
         start, settled, t_start = ss.index, ss.settled, ss.t_start
     else:
         settled, t_start = True, float(t[start])
@@ -301,14 +307,14 @@ def classify_run(
     tr: Trend | None = None
     if "shear_rate" in names:
         tr = trend(tt, column(series, "shear_rate")[start:])
-    state = "flowing"
+    state = FlowState.FLOWING
     if arrested:
-        state = "arrested"
+        state = FlowState.ARRESTED
     elif tr is not None and abs(tr.t_stat) > t_sig and abs(tr.rel_drift) > max_rel_drift:
-        state = "accelerating" if tr.slope > 0 else "decelerating"
-    return RunState(
+        state = FlowState.ACCELERATING if tr.slope > 0 else FlowState.DECELERATING
+    return CellState(
         state,
-        state in ("flowing", "arrested"),
+        state in (FlowState.FLOWING, FlowState.ARRESTED),
         settled,
         t_start,
         int(start),
@@ -320,14 +326,14 @@ def classify_run(
 
 
 @dataclass
-class RunResult:
+class RunAnalysis:
     """Classification and per-observable statistics of one run.
 
     ``stats`` has one row per observable: observable, mean, se, se_err, tau (integrated
     correlation time, time units), converged, n.
     """
 
-    state: RunState
+    state: CellState
     stats: pl.DataFrame
 
 
@@ -339,7 +345,7 @@ def analyse_run(
     columns: Sequence[str] | None = None,
     min_blocks: int = DEFAULT_MIN_BLOCKS,
     **classify_kwargs: Any,
-) -> RunResult:
+) -> RunAnalysis:
     """Steady-state detection, classification and mean / SE / correlation time of every
     observable column (:func:`observable_columns`) of a cell ``series`` table."""
     st = classify_run(series, start=start, **classify_kwargs)
@@ -362,7 +368,7 @@ def analyse_run(
             "n": b.n,
         }
     )
-    return RunResult(st, stats)
+    return RunAnalysis(st, stats)
 
 
 @quiet
@@ -388,7 +394,7 @@ def collect_runs(
         row: dict[str, Any] = dict(params)
         row.update(
             {
-                "state": st.state,
+                "state": st.state.value,  # a table holds the plain string
                 "averaged": st.averaged,
                 "settled": st.settled,
                 "t_start": st.t_start,
@@ -417,12 +423,12 @@ def seed_coverage(runs: Sequence[TableLike], columns: Sequence[str] = ("I", "phi
     for s in runs:
         res = analyse_run(s, columns=list(columns), **classify_kwargs)
         for r in res.stats.iter_rows(named=True):
-            rows.append({"state": res.state.state, **r})
+            rows.append({"state": res.state.state.value, **r})
     d = pl.DataFrame(rows)
     return d.group_by("observable", maintain_order=True).agg(
         pl.len().alias("seeds"), pl.col("mean").mean().alias("mean_over_seeds"),
         pl.col("mean").std().alias("spread"), (pl.col("se") ** 2).mean().sqrt().alias("rms_se"),
-        (pl.col("state") == "flowing").all().alias("all_flowing"),
+        (pl.col("state") == FlowState.FLOWING).all().alias("all_flowing"),
     ).with_columns((pl.col("spread") / pl.col("rms_se")).alias("spread_over_se"))
 
 
@@ -498,7 +504,7 @@ class FitResult:
 
 
 def _initial_guess(
-    spec: LawSpec, x: FloatArray, y: FloatArray, w: FloatArray
+    spec: FlowLaw, x: FloatArray, y: FloatArray, w: FloatArray
 ) -> tuple[float, float, float]:
     """Grid over the exponent with a weighted linear solve for (c0, A) at each exponent."""
     best = (float(np.average(y, weights=w)), 0.1, 0.5)
@@ -561,7 +567,7 @@ def fit_law(
     x = ii**spec.x_power
 
     def model(xv: FloatArray, c0: float, A: float, a: float) -> FloatArray:
-        return c0 + spec.sign * A * xv**a
+        return power_law(xv, c0, A, a, spec.sign)
 
     start = tuple(p0) if p0 is not None else _initial_guess(spec, x, yy, 1.0 / sy**2)
     lo, hi = [-np.inf, 0.0, 0.01], [np.inf, np.inf, 5.0]
@@ -623,7 +629,7 @@ JOP_EQUATION = "mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) (Jop et al. 2006)"
 def jop_value(I: npt.ArrayLike, mu_s: float, mu_2: float, I_0: float) -> FloatArray:  # noqa: E741
     """Jop et al.'s mu(I) at ``I``."""
     ii = np.asarray(I, dtype=np.float64)
-    return mu_s + (mu_2 - mu_s) * ii / (ii + I_0)
+    return jop_law(ii, mu_s, mu_2 - mu_s, I_0)
 
 
 @quiet
@@ -669,7 +675,7 @@ def fit_flow_law(
     df: TableLike,
     law: str,
     *,
-    states: Sequence[str] | None = ("flowing",),
+    states: Sequence[str] | None = (FlowState.FLOWING,),
     include_x_errors: bool = False,
     x_col: str = "I",
     y_col: str | None = None,

@@ -569,6 +569,7 @@ class Channel:
         value with its ``<name>_se``."""
         from granflow.analysis import channel as ach
         from granflow.analysis.channel_profiles import flow_state
+        from granflow.analysis.estimate import Estimate
 
         t = self.tables()
         out: dict[str, Any] = {"n": self.prep_info.get("n"),
@@ -584,9 +585,8 @@ class Channel:
             out["analysis_error"] = f"{type(exc).__name__}: {exc}"
             return out
         for k, v in s.items():
-            if isinstance(v, dict) and "value" in v:
-                out[k] = v["value"]
-                out[k + "_se"] = v.get("se")
+            if isinstance(v, Estimate):
+                out[k], out[k + "_se"] = v
             elif isinstance(v, (int, float, str, bool)):
                 out[k] = v
         return out

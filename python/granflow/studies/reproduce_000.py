@@ -36,7 +36,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -46,6 +46,7 @@ import polars as pl
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from granflow.analysis.estimate import Estimate
 from granflow.errors import GranflowError
 
 #: the steady part's fractions at which the SE is recorded (error against run time)
@@ -162,9 +163,9 @@ def quick_plan() -> Plan:
 # --------------------------------------------------------------------------------------------
 # one point
 # --------------------------------------------------------------------------------------------
-def _est(d: Mapping[str, Any]) -> tuple[float, float]:
-    """(value, SE) of a summary entry ``{"value", "se"}``."""
-    return float(d["value"]), float(d["se"])
+def _est(e: Estimate) -> tuple[float, float]:
+    """(value, SE) of a summary entry."""
+    return float(e.value), float(e.se)
 
 
 def _se_rows(point: Point, bins: pa.Table, t_start: float, t_end: float) -> list[dict[str, Any]]:
