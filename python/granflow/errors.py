@@ -2,7 +2,8 @@
 
 ``GranflowError`` is the base class; ``ParameterError`` names the parameter
 and its allowed range; ``ConfigurationError`` rejects unusable particle configurations;
-``InstabilityError`` stops a run that went unstable (step, particles, likely cause);
+``InstabilityError`` stops a run that went unstable (step, particles, likely cause), and its
+``DilationError`` the stress-controlled cell's runaway dilation;
 ``GranflowIOError`` covers files.
 """
 
@@ -14,10 +15,17 @@ from granflow._core import (
     ParameterError,
 )
 
+
+class DilationError(InstabilityError):
+    """The stress-controlled cell dilated without bound: the imposed shear stress exceeds what
+    the packing sustains."""
+
+
 __all__ = [
     "GranflowError",
     "ParameterError",
     "ConfigurationError",
     "InstabilityError",
+    "DilationError",
     "GranflowIOError",
 ]
