@@ -42,7 +42,7 @@ ERRORS = {"dilation": DilationError, "instability": InstabilityError,
 
 
 class Scene:
-    """A scripted scene: a sample per step of its time; ``fail_at`` raises ``raises`` inside a stint."""
+    """A scripted scene: a sample per step of its time; stint ``fail_at`` raises ``raises``."""
 
     def __init__(self, point: Point, plan: Plan) -> None:
         self.point, self.plan = point, plan
