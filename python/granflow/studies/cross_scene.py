@@ -72,15 +72,15 @@ def channel_material() -> dict[str, Any]:
 CAL_OBSERVABLES = (*OBSERVABLES, *GRADIENT_COLUMNS, "sigma_yy")
 
 
-def _plan(name: str, points: Iterable[Point], stint: int, max_shear: Mapping[int, int],
-          **kw: Any) -> Plan:
-    """A calibration plan; ``stint`` and ``max_shear`` in steps (at the channel's dt),
-    converted to the plan's contact times."""
+def _plan(name: str, points: Iterable[Point], stint_steps: int,
+          max_shear_steps: Mapping[int, int], **kw: Any) -> Plan:
+    """A calibration plan with its stint and budgets given in steps (the channel's dt, the
+    calibration's committed stints), as the plan's contact times."""
     opts = channel_material()
     f = opts["dt_frac"]
     return Plan(name, tuple(dict.fromkeys(points)), cell_options=opts,
-                observables=CAL_OBSERVABLES, stint=stint * f,
-                max_shear={n: s * f for n, s in max_shear.items()}, **kw)
+                observables=CAL_OBSERVABLES, stint=stint_steps * f,
+                max_shear={n: s * f for n, s in max_shear_steps.items()}, **kw)
 
 
 def full_plan() -> Plan:
@@ -93,13 +93,15 @@ def full_plan() -> Plan:
     pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in NEAR_YIELD_LARGE]
     pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in (1, 2, 3) for r in NEAR_YIELD]
     pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in BELOW_YIELD_LARGE]
-    return _plan("full", pts, stint=20_000, max_shear={2000: 1_000_000, 10_000: 400_000})
+    return _plan("full", pts, stint_steps=20_000,
+                 max_shear_steps={2000: 1_000_000, 10_000: 400_000})
 
 
 def quick_plan() -> Plan:
     """Minutes on two cores: N = 500, five ratios, one seed, SE target 2 %."""
     pts = [Point(MU_CHANNEL, r, 1, N=500, p_ext=P_LOW) for r in (0.45, 0.5, 0.55, 0.6, 0.65)]
-    return _plan("quick", pts, se_target=0.02, stint=10_000, max_shear={500: 100_000})
+    return _plan("quick", pts, se_target=0.02, stint_steps=10_000,
+                 max_shear_steps={500: 100_000})
 
 
 # --------------------------------------------------------------------------------------------
