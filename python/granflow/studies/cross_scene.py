@@ -6,11 +6,12 @@ the channel's material, laid over the channel's DEM profiles at several widths.
     python -m granflow.studies.cross_scene --full [--out DIR] [--report FILE] [--workers N]
            [--channel DIR] [--reanalyse] [--only-report]
 
-This module is the command, the channel's material and the calibration campaign's plans; the
+This module is the command and the calibration campaign's plans; the
 analysis is :mod:`granflow.analysis.calibration` and :mod:`granflow.analysis.channel_model`,
 the report :mod:`granflow.studies.cross_scene_report`. The chain: (1) the calibration campaign,
 cell runs (granflow.studies._campaign.cell: reproduce_002's points and stop rule) with the
-channel's particles and contact law (channel_material) at the channel's pressure scale,
+channel's particles and contact law (_campaign.cell.channel_material) at the channel's pressure
+scale,
 appended point by point to ``OUT/points.parquet`` (resumable); (2) fits of mu(I) and phi(I) in
 the channel's variables (rheology.gradient_frame) with their covariance, ``OUT/fits.parquet``;
 (3) the continuum solutions (granflow.continuum) for every steady channel run of the
@@ -22,15 +23,12 @@ compare, model_profiles, residuals, boundary).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-import numpy as np
-
 from granflow.analysis.rheology import GRADIENT_COLUMNS
 
-from ._campaign.cell import OBSERVABLES, Plan, Point
+from ._campaign.cell import OBSERVABLES, Plan, Point, channel_material
 
 #: the channel's particle friction (000: mu = 0.5), the cell's mu_s
 MU_CHANNEL = 0.5
@@ -45,27 +43,6 @@ NEAR_YIELD_LARGE = (0.40, 0.41, 0.42)
 #: below 0.40 at N = 10,000 (N = 2000 arrests at 0.38 and, for some seeds, at 0.40): does a
 #: larger cell hold a slower steady flow? (run last)
 BELOW_YIELD_LARGE = (0.39, 0.395, 0.385, 0.38)
-
-
-def channel_material() -> dict[str, Any]:
-    """The channel's material as cell options (ShearCell keywords): its size mix, kt/kn,
-    e_n and the same dt per contact time, read from the Channel scene's and the contact
-    law's defaults (their one home). The tangential damping ratio (1/2) is both scenes'."""
-    from granflow.scenes.cell import contact_time
-    from granflow.scenes.channel import Channel
-    from granflow.simulation import ContactLaw
-
-    dflt: dict[str, Any] = {
-        f.name: (f.default_factory() if f.default_factory is not dataclasses.MISSING
-                 else f.default) for f in dataclasses.fields(Channel)}
-    law = ContactLaw(kn=dflt["kn"], e_n=dflt["e_n"], mu=dflt["mu"], kt=dflt["kt"])
-    assert law.kn is not None and law.kt is not None and law.e_n is not None
-    sizes = {float(k): float(v) for k, v in dflt["sizes"].items()}
-    m_mean = dflt["density"] * np.pi / 6 * sum(f * k**3 for k, f in sizes.items())
-    # the cell's t_c: its mean-particle collision time with this e_n
-    tc = contact_time(law.kn, m_mean / 2, "collision", law.e_n)
-    return {"size_mix": sizes, "kt_ratio": law.kt / law.kn, "e_n": law.e_n,
-            "density": dflt["density"], "dt_frac": float(dflt["dt"] / tc)}
 
 
 #: observables kept per calibration point

@@ -26,7 +26,7 @@ from granflow.analysis.channel_model import (
 from granflow.analysis.plots import ZONE_COLOURS, save_figure
 
 from ._campaign import md_table
-from .cross_scene import channel_material
+from ._campaign.cell import channel_material
 
 MODELS = ("local", "nonlocal")
 COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}

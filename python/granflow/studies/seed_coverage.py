@@ -11,8 +11,8 @@ one stint of ``length`` contact times with no SE target (so that every seed runs
 length). Per observable: ratio = standard deviation of the seeds' means / root mean square of
 their reported SEs; with honest SEs it is 1 within the sampling error of a standard deviation
 from K seeds, 1 +- 1.96/sqrt(2 (K - 1)) at 95 %. PASS when the root mean square of the ratios
-of I, phi and mu2 is within 0.7-1.4 (issue 21, item 7; benchmarks/seed_coverage.py is the
-same check outside the engine).
+of I, phi and mu2 is within 0.7-1.4 (benchmarks/seed_coverage.py is the same check outside
+the engine).
 """
 
 from __future__ import annotations

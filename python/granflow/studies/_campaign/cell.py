@@ -13,6 +13,7 @@ to ``OUT/se_vs_time.parquet``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -95,6 +96,27 @@ class Plan:
     def targets(self) -> dict[str, float]:
         """Relative SE each observable must reach (SE_TARGETS x ``se_target``)."""
         return {k: f * self.se_target for k, f in SE_TARGETS.items()}
+
+
+def channel_material() -> dict[str, Any]:
+    """The channel's material as cell options (ShearCell keywords): its size mix, kt/kn,
+    e_n and the same dt per contact time, read from the Channel scene's and the contact
+    law's defaults (their one home). The tangential damping ratio (1/2) is both scenes'."""
+    from granflow.scenes.cell import contact_time
+    from granflow.scenes.channel import Channel
+    from granflow.simulation import ContactLaw
+
+    dflt: dict[str, Any] = {
+        f.name: (f.default_factory() if f.default_factory is not dataclasses.MISSING
+                 else f.default) for f in dataclasses.fields(Channel)}
+    law = ContactLaw(kn=dflt["kn"], e_n=dflt["e_n"], mu=dflt["mu"], kt=dflt["kt"])
+    assert law.kn is not None and law.kt is not None and law.e_n is not None
+    sizes = {float(k): float(v) for k, v in dflt["sizes"].items()}
+    m_mean = dflt["density"] * np.pi / 6 * sum(f * k**3 for k, f in sizes.items())
+    # the cell's t_c: its mean-particle collision time with this e_n
+    tc = contact_time(law.kn, m_mean / 2, "collision", law.e_n)
+    return {"size_mix": sizes, "kt_ratio": law.kt / law.kn, "e_n": law.e_n,
+            "density": dflt["density"], "dt_frac": float(dflt["dt"] / tc)}
 
 
 # --------------------------------------------------------------------------------------------
