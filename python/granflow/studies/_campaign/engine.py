@@ -149,6 +149,10 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     def wall() -> float:
         return float(info["wall_seconds"]) + time.perf_counter() - t0
 
+    def write_meta() -> None:
+        meta.write_text(json.dumps({**info, "wall_seconds": wall(), "history": history,
+                                    "context": context}))
+
     error: GranflowError | None = None
     row: dict[str, Any] = {}
     try:
@@ -157,12 +161,12 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
             for name, tab in scene.tables().items():
                 io.write_parquet(tab, d / f"{name}.parquet")
             scene.save_checkpoint(ck)
+            write_meta()  # (a checkpoint is never without its meta, even before the row)
             row = study.row(point, plan, scene.tables(), context)
             row.update(study.progress(scene, info["prep_seconds"]))
             done = study.stop(row, point, plan, history)
             history.append(str(row["state"]))
-            meta.write_text(json.dumps({**info, "wall_seconds": wall(), "history": history,
-                                        "context": context}))
+            write_meta()
             if done is not None:
                 break
     except GranflowError as exc:
