@@ -10,12 +10,13 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
+from granflow.analysis import calibration as acal
+from granflow.analysis import channel_model as cm
 from granflow.analysis import rheology as rh
 from granflow.continuum import LocalLaw
 from granflow.errors import ParameterError
 from granflow.scenes.cell import contact_time
 from granflow.studies import cross_scene as cs
-from granflow.studies import cross_scene_predict as csp
 
 CHANNEL = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
 
@@ -50,7 +51,7 @@ def test_jop_fit_recovers_its_constants_and_their_errors():
 
 
 def test_the_cell_takes_the_channels_material():
-    mat = csp.channel_material()
+    mat = cs.channel_material()
     assert mat["size_mix"] == {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}
     assert mat["kt_ratio"] == pytest.approx(2 / 7) and mat["e_n"] == 0.82
     # the channel's dt per contact time: 1.2e-4 sqrt(1e6/kn) at the mean pair's t_c
@@ -65,29 +66,29 @@ def test_a_calibration_needs_four_steady_points():
              "I_g": 0.1 * r, "I_g_se": 1e-3, "mu_g": r, "mu_g_se": 1e-3, "phi": 0.6 - r / 10,
              "phi_se": 1e-3, "sigma_g_p": 1.05, "sigma_g_p_se": 1e-3} for r in (0.45, 0.5, 0.6)]
     with pytest.raises(ParameterError, match="p_ext = 0.0002: 3 steady points"):
-        csp.calibrate(pl.DataFrame(rows))
+        acal.calibrate(pl.DataFrame(rows))
 
 
 def test_a_channel_dataset_without_steady_runs_is_refused(tmp_path):
     for f in ("points", "profiles"):
         pl.read_parquet(CHANNEL / f"{f}.parquet").head(0).write_parquet(tmp_path / f"{f}.parquet")
     with pytest.raises(ParameterError, match="no steady run"):
-        csp.channel_cases(tmp_path)
+        cm.channel_cases(tmp_path)
 
 
 def test_a_law_calibrated_below_the_channels_stress_is_refused():
     # the W = 60, phi_bar = 0.59 run needs a wall stress ratio of ~0.42: a law calibrated
     # only up to I = 0.05 (mu ~ 0.40) does not cover it, in either model
-    case = next(c for c in csp.channel_cases(CHANNEL) if c.W == 60 and c.phi_bar == 0.59)
+    case = next(c for c in cm.channel_cases(CHANNEL) if c.W == 60 and c.phi_bar == 0.59)
     short = LocalLaw(0.36, 0.47, 0.56, 0.59, 0.16, 1.0, 0.03, 0.05, mu_form="jop")
     for model in ("local", "nonlocal"):
         with pytest.raises(ParameterError, match=r"mu\(I_max\).*calibrate"):
-            csp.solve(model, short, case, 0.5)
+            cm.solve(model, short, case, 0.5)
 
 
 def test_a_missing_channel_dataset_is_named(tmp_path):
     with pytest.raises(ParameterError, match="no points.parquet, profiles.parquet"):
-        csp.channel_cases(tmp_path)
+        cm.channel_cases(tmp_path)
 
 
 @pytest.fixture(scope="module")
@@ -99,6 +100,7 @@ def quick(tmp_path_factory):
     return out, report
 
 
+@pytest.mark.slow
 def test_the_quick_chain_writes_its_datasets_and_report(quick):
     out, report = quick
     pts = pl.read_parquet(out / "points.parquet")
@@ -116,9 +118,9 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
         assert cases[col].is_finite().all(), col
     z = pl.read_parquet(out / "compare.parquet")
     assert set(z["model"].to_list()) == {"local", "nonlocal"}
-    assert set(z["zone"].to_list()) <= set(csp.ZONES) and z["u_rel"].is_finite().all()
+    assert set(z["zone"].to_list()) <= set(cm.ZONES) and z["u_rel"].is_finite().all()
     b = pl.read_parquet(out / "boundary.parquet")
-    assert sorted(set(b["bin"].to_list())) == list(csp.BOUNDARY_BINS)
+    assert sorted(set(b["bin"].to_list())) == list(cm.BOUNDARY_BINS)
     assert (b["A_best"] > 0).all() and b["u_rel_held"].is_finite().all()
     text = report.read_text()
     for key in ("Nonlocal amplitude: A =", "Misfit per zone", "core-hours", "## Time"):

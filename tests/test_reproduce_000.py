@@ -13,6 +13,8 @@ from granflow.studies import reproduce_000 as rp
 from granflow.studies._campaign import point_of
 from granflow.studies.reproduce_000_report import write_report
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):

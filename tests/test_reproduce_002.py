@@ -11,6 +11,8 @@ import pytest
 from granflow.studies import reproduce_002 as rp
 from granflow.studies.reproduce_002_report import write_report
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):

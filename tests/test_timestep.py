@@ -9,6 +9,7 @@ import granflow as gf
 import numpy as np
 import polars as pl
 import pytest
+from granflow.analysis.collision import collision_law, head_on_collision
 from granflow.studies import timestep as ts
 
 
@@ -36,8 +37,8 @@ def test_binary_collision_converges_to_analytic_e_n(collision):
 
 
 def test_single_collision_energy_and_overlap():
-    law = ts.collision_law(0.5, 1e7)
-    c = ts.head_on_collision(law, phase=0.25)
+    law = collision_law(0.5, 1e7)
+    c = head_on_collision(law, phase=0.25)
     assert c.finite and 0 < c.max_overlap < 0.01
     assert c.dt == pytest.approx(c.t_c / 50)
     assert c.e_n == pytest.approx(0.5, abs=3e-3)
@@ -49,9 +50,9 @@ def test_refusals():
     with pytest.raises(gf.ParameterError, match="fracs"):
         ts.binary_collision_study(fracs=(5, 50))
     with pytest.raises(gf.ParameterError, match="xi_n"):
-        ts.head_on_collision(ts.collision_law(None, 1e6, xi_n=1e5))
+        head_on_collision(collision_law(None, 1e6, xi_n=1e5))
     with pytest.raises(gf.ParameterError, match="phase"):
-        ts.head_on_collision(ts.collision_law(), phase=1.5)
+        head_on_collision(collision_law(), phase=1.5)
 
 
 def test_scene_study_on_gas_and_plot(tmp_path):

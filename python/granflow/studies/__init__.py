@@ -10,7 +10,11 @@
   (``python -m granflow.studies.reproduce_002``);
 - :mod:`granflow.studies.cross_scene` — the channel predicted from the cell (local mu(I) and
   nonlocal fluidity, calibrated in the cell), and its report
-  (``python -m granflow.studies.cross_scene``).
+  (``python -m granflow.studies.cross_scene``);
+- :mod:`granflow.studies.seed_coverage` — are the cell's SEs honest: seeds of one point
+  against their reported SEs (``python -m granflow.studies.seed_coverage``).
 
-The three run as resumable campaigns (:mod:`granflow.studies._campaign`).
+The last four run as resumable campaigns on one engine (:mod:`granflow.studies._campaign`: a
+study gives a point, a plan, its scene, a row and one stop rule). Studies import no other study
+but through ``_campaign``; a study's ``*_report`` module imports its own study.
 """

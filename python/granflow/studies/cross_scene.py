@@ -6,28 +6,29 @@ the channel's material, laid over the channel's DEM profiles at several widths.
     python -m granflow.studies.cross_scene --full [--out DIR] [--report FILE] [--workers N]
            [--channel DIR] [--reanalyse] [--only-report]
 
-This module is the command and the calibration campaign's plans; the analysis is
-:mod:`granflow.studies.cross_scene_predict`, the report
-:mod:`granflow.studies.cross_scene_report`. The chain: (1) the calibration campaign, cell runs
-(granflow.studies.reproduce_002's points and stopping rule) with the channel's particles and
-contact law (cross_scene_predict.channel_material) at the channel's pressure scale, appended
-point by point to ``OUT/points.parquet`` (resumable); (2) fits of mu(I) and phi(I) in the
-channel's variables (rheology.gradient_frame) with their covariance, ``OUT/fits.parquet``; (3)
-the continuum solutions (granflow.continuum) for every steady channel run of the reproduce_000
-dataset (``--channel``, default the committed docs/data/reproduce_000), the nonlocal amplitude
-fitted on one width only; (4) the report (cross_scene_report), with the comparison tables also
-written beside the points (cases, compare, model_profiles, residuals, boundary).
+This module is the command and the calibration campaign's plans; the
+analysis is :mod:`granflow.analysis.calibration` and :mod:`granflow.analysis.channel_model`,
+the report :mod:`granflow.studies.cross_scene_report`. The chain: (1) the calibration campaign,
+cell runs (granflow.studies._campaign.cell: reproduce_002's points and stop rule) with the
+channel's particles and contact law (_campaign.cell.channel_material) at the channel's pressure
+scale,
+appended point by point to ``OUT/points.parquet`` (resumable); (2) fits of mu(I) and phi(I) in
+the channel's variables (rheology.gradient_frame) with their covariance, ``OUT/fits.parquet``;
+(3) the continuum solutions (granflow.continuum) for every steady channel run of the
+reproduce_000 dataset (``--channel``, default the committed docs/data/reproduce_000), the
+nonlocal amplitude fitted on one width only; (4) the report (cross_scene_report), with the
+comparison tables also written beside the points (cases,
+compare, model_profiles, residuals, boundary).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 from granflow.analysis.rheology import GRADIENT_COLUMNS
 
-from .cross_scene_predict import channel_material
-from .reproduce_002 import OBSERVABLES, Plan, Point
+from ._campaign.cell import OBSERVABLES, Plan, Point, channel_material
 
 #: the channel's particle friction (000: mu = 0.5), the cell's mu_s
 MU_CHANNEL = 0.5
@@ -48,9 +49,15 @@ BELOW_YIELD_LARGE = (0.39, 0.395, 0.385, 0.38)
 CAL_OBSERVABLES = (*OBSERVABLES, *GRADIENT_COLUMNS, "sigma_yy")
 
 
-def _plan(name: str, points: Iterable[Point], **kw: Any) -> Plan:
-    return Plan(name, tuple(dict.fromkeys(points)), cell_options=channel_material(),
-                observables=CAL_OBSERVABLES, **kw)
+def _plan(name: str, points: Iterable[Point], stint_steps: int,
+          max_shear_steps: Mapping[int, int], **kw: Any) -> Plan:
+    """A calibration plan with its stint and budgets given in steps (the channel's dt, the
+    calibration's committed stints), as the plan's contact times."""
+    opts = channel_material()
+    f = opts["dt_frac"]
+    return Plan(name, tuple(dict.fromkeys(points)), cell_options=opts,
+                observables=CAL_OBSERVABLES, stint=stint_steps * f,
+                max_shear={n: s * f for n, s in max_shear_steps.items()}, **kw)
 
 
 def full_plan() -> Plan:
@@ -63,14 +70,15 @@ def full_plan() -> Plan:
     pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in NEAR_YIELD_LARGE]
     pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in (1, 2, 3) for r in NEAR_YIELD]
     pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in BELOW_YIELD_LARGE]
-    return _plan("full", pts, stint=20_000,
+    return _plan("full", pts, stint_steps=20_000,
                  max_shear_steps={2000: 1_000_000, 10_000: 400_000})
 
 
 def quick_plan() -> Plan:
     """Minutes on two cores: N = 500, five ratios, one seed, SE target 2 %."""
     pts = [Point(MU_CHANNEL, r, 1, N=500, p_ext=P_LOW) for r in (0.45, 0.5, 0.55, 0.6, 0.65)]
-    return _plan("quick", pts, se_target=0.02, stint=10_000, max_shear_steps={500: 100_000})
+    return _plan("quick", pts, se_target=0.02, stint_steps=10_000,
+                 max_shear_steps={500: 100_000})
 
 
 # --------------------------------------------------------------------------------------------
@@ -84,7 +92,7 @@ def main(argv: Iterable[str] | None = None) -> None:
     from granflow.studies.cross_scene_report import write_report
 
     from ._campaign import cli
-    from .reproduce_002 import reanalyse, run_campaign
+    from ._campaign.cell import reanalyse, run_campaign
 
     cli(argv, module="granflow.studies.cross_scene", description=(__doc__ or "").splitlines()[0],
         plans={"quick": (quick_plan, "minutes-long calibration subset (default)"),

@@ -13,19 +13,20 @@ import numpy as np
 import polars as pl
 from matplotlib.figure import Figure
 
-from granflow.analysis.plots import ZONE_COLOURS, save_figure
-
-from ._campaign import md_table
-from .cross_scene_predict import (
+from granflow.analysis.calibration import fits_table
+from granflow.analysis.channel_model import (
     A_PHI_BAR,
     A_WIDTH,
     I_PLUG,
     ZONES,
     Prediction,
-    channel_material,
-    fits_table,
+    channel_cases,
     predict,
 )
+from granflow.analysis.plots import ZONE_COLOURS, save_figure
+
+from ._campaign import md_table
+from ._campaign.cell import channel_material
 
 MODELS = ("local", "nonlocal")
 COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}
@@ -293,8 +294,6 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     figdir = path.parent / f"{path.stem}_figures"
     rel = path.parent
     figs = [plot_law(pred, figdir / "law.png")]
-    from .cross_scene_predict import channel_cases
-
     phis = sorted(set(pred.cases["phi_bar"].to_list()))
     for case in channel_cases(channel):
         if case.phi_bar == (A_PHI_BAR if A_PHI_BAR in phis else phis[0]):

@@ -32,11 +32,9 @@ and the SEs of u_slip and u_max over the first quarter, half and all of its stea
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -44,10 +42,11 @@ from typing import Any
 import numpy as np
 import polars as pl
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from granflow.analysis.estimate import Estimate
-from granflow.errors import GranflowError
+
+from ._campaign import Study, done_keys, fmt, run_points
+from ._campaign import reanalyse as engine_reanalyse
 
 #: the steady part's fractions at which the SE is recorded (error against run time)
 SE_FRACTIONS = (0.25, 0.5, 1.0)
@@ -86,13 +85,6 @@ class Point:
     def dt(self) -> float:
         """1.2e-4 sqrt(1e6/k_n): 000's step at k_n = 1e6 (~t_c/11), scaled with t_c."""
         return 1.2e-4 * math.sqrt(1e6 / self.kn)
-
-    def channel(self, threads: int | None = 1) -> Any:
-        from granflow.scenes.channel import Channel
-
-        return Channel(W=self.W, H=self.H, B=self.B, phi_bar=self.phi_bar, kn=self.kn,
-                       dt=self.dt, seed=self.seed, threads=threads,
-                       sample_every=max(1, round(SAMPLE_DT / self.dt)), window=WINDOW)
 
 
 @dataclass(frozen=True)
@@ -239,112 +231,73 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table) -> dic
     return row
 
 
-def _tables(ch: Any) -> tuple[pa.Table, pa.Table]:
-    t = ch.tables()
-    return t["bins"], t["series"]
-
-
-def run_point(point: Point, plan: Plan, work: str, threads: int = 1) -> dict[str, Any]:
-    """Run (or go on with) one point in ``work/<key>`` in stints until :func:`point_row`
-    says it is steady and converged, or arrested for two stints, or ``t_max``; returns its
-    row (with ``prep_seconds``, the preparation's wall time, and ``wall_seconds``, all of
-    it). An instability is a row with ``state`` "failed" and the error."""
-    from granflow import io
-
-    d = Path(work) / point.key
-    d.mkdir(parents=True, exist_ok=True)
-    ck, meta = d / "checkpoint.gfck", d / "meta.json"
-    fb, fs = d / "bins.parquet", d / "series.parquet"
-    ch = point.channel(threads)
-    info: dict[str, Any] = {"wall_seconds": 0.0, "prep_seconds": math.nan}
-    if ck.exists() and meta.exists():
-        ch.restore(ck)
-        ch.load_tables({"bins": pq.read_table(fb), "series": pq.read_table(fs)})
-        info = json.loads(meta.read_text())
-    t0 = time.perf_counter()
-    if ch.sim is None:
-        if point.parent:
-            ch.branch_from(Path(work) / point.parent / "checkpoint.gfck")
-        else:
-            ch.prepare(progress=False)
-        info["prep_seconds"] = time.perf_counter() - t0
-    t_max, _ = plan.limits(point)
-    steps = max(1, round(plan.stint / point.dt))
-
-    def save() -> None:
-        b, s = _tables(ch)
-        io.write_parquet(b, fb)
-        io.write_parquet(s, fs)
-        ch.save_checkpoint(ck)
-        meta.write_text(json.dumps({**info, "wall_seconds": info["wall_seconds"]
-                                    + time.perf_counter() - t0}))
-
-    error = None
-    row: dict[str, Any] = {}
-    arrested = 0
-    try:
-        while ch.core.time < t_max - 1e-9:
-            ch.run(min(steps, max(1, round((t_max - ch.core.time) / point.dt))), progress=False)
-            save()
-            row = point_row(point, plan, *_tables(ch))
-            arrested = arrested + 1 if row["state"] == "arrested" else 0
-            if row["converged"] or arrested >= 2:
-                break
-    except GranflowError as exc:
-        error = f"{type(exc).__name__}: {exc}"
-    if not row:
-        row = point_row(point, plan, *_tables(ch))
-    if error is not None:
-        row.update(state="failed", error=error, converged=False)
-    row.update(n=ch.prep_info.get("n"), phi_bar_achieved=ch.prep_info.get("phi_bar_achieved"),
-               settle_time=ch.prep_info.get("settle_time"), t_run=float(ch.core.time),
-               steps=int(ch.core.step), prep_seconds=info["prep_seconds"],
-               wall_seconds=info["wall_seconds"] + time.perf_counter() - t0)
-    return row
-
-
 ROW_TABLES = {"profile_rows": "profiles", "zone_rows": "zones", "se_rows": "se_vs_time"}
 
 
-def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
-    """Recompute the rows of ``out/points.parquet`` (and its other tables) from the tables
-    kept in ``out/work`` (after a change of the analysis); a point that no longer meets the
-    criterion, and has time left, is dropped so that the next run goes on with it from its
-    checkpoint. Returns the number of points dropped."""
-    from ._campaign import point_of, write_rows
+class ChannelStudy(Study):
+    """The channel campaign on the engine: a point (or a branch, from its parent's
+    checkpoint) in stints of ``plan.stint`` time units until :func:`point_row` says it is
+    steady and converged, or it arrested at two stints running, or ``t_max``. Its row ends
+    with ``prep_seconds``, the preparation's wall time (``wall_seconds`` is all of it)."""
 
-    outp = Path(out)
-    pts = pl.read_parquet(outp / "points.parquet")
-    keep: list[dict[str, Any]] = []
-    extra: dict[str, list[dict[str, Any]]] = {k: [] for k in ROW_TABLES}
-    dropped = 0
-    for old in pts.iter_rows(named=True):
-        point = point_of(Point, old)
-        d = outp / "work" / point.key
-        if not (d / "bins.parquet").exists() or old["state"] == "failed":
-            keep.append(old)
-            continue
-        row = point_row(point, plan, pq.read_table(d / "bins.parquet"),
-                        pq.read_table(d / "series.parquet"))
-        if (not row["converged"] and row["state"] != "arrested"
-                and old["t_run"] < plan.limits(point)[0] - 1e-6):
-            dropped += 1
-            continue
-        for k in ROW_TABLES:
-            extra[k] += row.pop(k)
-        keep.append({**old, **row})
-    write_rows(outp / "points.parquet", keep)
-    for k, stem in ROW_TABLES.items():
-        write_rows(outp / f"{stem}.parquet", extra[k])
-    return dropped
+    tables = ROW_TABLES
+
+    def scene(self, point: Point, plan: Plan, threads: int) -> Any:
+        from granflow.scenes.channel import Channel
+
+        return Channel(W=point.W, H=point.H, B=point.B, phi_bar=point.phi_bar, kn=point.kn,
+                       dt=point.dt, seed=point.seed, threads=threads,
+                       sample_every=max(1, round(SAMPLE_DT / point.dt)), window=WINDOW)
+
+    def start(self, scene: Any, point: Point, plan: Plan, work: Path) -> None:
+        if point.parent:
+            scene.branch_from(work / point.parent / "checkpoint.gfck")
+        else:
+            scene.prepare(progress=False)
+
+    def next_steps(self, scene: Any, point: Point, plan: Plan) -> int:
+        t_max, _ = plan.limits(point)
+        if scene.core.time >= t_max - 1e-9:
+            return 0
+        return min(max(1, round(plan.stint / point.dt)),
+                   max(1, round((t_max - scene.core.time) / point.dt)))
+
+    def progress(self, scene: Any, prep_seconds: float) -> dict[str, Any]:
+        return {"n": scene.prep_info.get("n"),
+                "phi_bar_achieved": scene.prep_info.get("phi_bar_achieved"),
+                "settle_time": scene.prep_info.get("settle_time"),
+                "t_run": float(scene.core.time), "steps": int(scene.core.step),
+                "prep_seconds": prep_seconds}
+
+    def row(self, point: Point, plan: Plan, tables: Mapping[str, pa.Table],
+            context: Mapping[str, Any]) -> dict[str, Any]:
+        return point_row(point, plan, tables["bins"], tables["series"])
+
+    def stop(self, row: Mapping[str, Any], point: Point, plan: Plan,
+             history: Sequence[str]) -> str | None:
+        if row["converged"]:
+            return "converged"
+        if row["state"] == "arrested" and history[-1:] == ["arrested"]:
+            return "arrested"
+        if row["t_run"] >= plan.limits(point)[0] - 1e-9:
+            return "budget"
+        return None
+
+
+#: the channel campaign's study (one instance: the engine sends it to the workers)
+STUDY = ChannelStudy()
+
+
+def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
+    """Recompute the finished points of ``out`` from their tables (the engine's
+    :func:`~granflow.studies._campaign.engine.reanalyse`); returns the number dropped."""
+    return engine_reanalyse(STUDY, Point, plan, out)
 
 
 # --------------------------------------------------------------------------------------------
 # the campaign
 # --------------------------------------------------------------------------------------------
 def _describe(row: dict[str, Any]) -> str:
-    from ._campaign import fmt
-
     return (f"{row.get('state')}{'' if row.get('converged') else ' (not converged)'}, "
             f"u_slip = {fmt(row, 'u_slip')}, u_max/u_slip = {fmt(row, 'u_max_over_u_slip')}, "
             f"t = {fmt(row, 't_run', '.0f')}, prep {fmt(row, 'prep_seconds', '.1f')} s, "
@@ -356,16 +309,14 @@ def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = 
     """Run the points of ``plan`` not yet in ``out/points.parquet`` (with the branches whose
     parents are done, first), then the other branches (their parents are done by then), then
     its later points; each finished point is appended there as it completes."""
-    from ._campaign import done_keys, run_points
-
-    kw: dict[str, Any] = {"tables": ROW_TABLES, "workers": workers, "scheduler": scheduler,
-                          "describe": _describe, "log": log}
+    kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "describe": _describe,
+                          "log": log}
     done = done_keys(Path(out), Point)
     ready = tuple(b for b in plan.branches if b.parent in done)
-    run_points((*ready, *plan.points), run_point, (plan,), out, name=plan.name, **kw)
+    run_points(STUDY, (*ready, *plan.points), plan, out, name=plan.name, **kw)
     waiting = tuple(b for b in plan.branches if b not in ready)
-    run_points(waiting, run_point, (plan,), out, name=f"{plan.name} branches", **kw)
-    return run_points(plan.later, run_point, (plan,), out, name=f"{plan.name} later", **kw)
+    run_points(STUDY, waiting, plan, out, name=f"{plan.name} branches", **kw)
+    return run_points(STUDY, plan.later, plan, out, name=f"{plan.name} later", **kw)
 
 
 def main(argv: Iterable[str] | None = None) -> None:

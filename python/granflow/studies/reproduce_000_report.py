@@ -5,7 +5,7 @@ zone, error against run time, the cost of each piece and the paper-scale recipe.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +15,7 @@ import polars as pl
 from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, scaled_profile_31
 from granflow.analysis.plots import save_figure
 
-from ._campaign import dask_recipe, md_table, pm
+from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
 
 #: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
 RATIO_PAPER = (1.37, 1.40)
@@ -392,59 +392,17 @@ def plot_profiles(rows: pl.DataFrame, profiles: pl.DataFrame, path: Path, title:
     return save_figure(fig, path, dpi=100)
 
 
-def plot_campaign_se(se: pl.DataFrame, path: Path) -> Path:
-    """SE of u_slip and u_max against the averaging time, a line per point, with T^-1/2."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(9, 3.6))
-    for k, col in enumerate(("u_slip", "u_max")):
-        ax = fig.add_subplot(1, 2, k + 1)
-        for _, g in se.group_by(["W", "phi_bar", "kn", "seed"], maintain_order=True):
-            g = g.sort("T_avg")
-            ax.plot(g["T_avg"], g[f"{col}_se"] / g[col], "o-", ms=3, lw=0.8,
-                    label=f"W = {g['W'][0]:g}, φ̄ = {g['phi_bar'][0]:g}, "
-                          f"k_n = {g['kn'][0]:.0e}")
-        t = np.array([se["T_avg"].min(), se["T_avg"].max()], dtype=float)
-        full = se.filter(pl.col("fraction") == 1.0)
-        c = float(np.median((full[f"{col}_se"] / full[col]).to_numpy()
-                            * np.sqrt(full["T_avg"].to_numpy())))
-        ax.plot(t, c / np.sqrt(t), "k--", label="median SE ~ T^-1/2")
-        ax.axhline(0.01, color="r", lw=0.6, label="1 % target")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("steady averaging time T (√(d/g))")
-        ax.set_ylabel(f"SE({col}) / {col}")
-        ax.legend(fontsize=5)
-    return save_figure(fig, path, dpi=100)
-
-
 # --------------------------------------------------------------------------------------------
 # cost
 # --------------------------------------------------------------------------------------------
-def cost(points: pl.DataFrame) -> tuple[pl.DataFrame, float]:
-    """Per W: points, preparation and run wall time, core-hours (one core a point); and the
-    throughput in particle-steps per core-second (runs only)."""
-    d = points.with_columns((pl.col("n") * pl.col("steps")).alias("particle_steps"))
-    per = d.group_by(["W", "kn"], maintain_order=True).agg(
-        pl.len().alias("points"), pl.col("n").max().alias("particles"),
-        pl.col("prep_seconds").max().alias("longest preparation (s)"),
-        (pl.col("wall_seconds").sum() / 3600).alias("core-hours"),
-        pl.col("wall_seconds").max().alias("longest point (s)")).sort(["kn", "W"])
-    run = (d["wall_seconds"] - d["prep_seconds"].fill_nan(0.0)).sum()
-    rate = float(d["particle_steps"].sum()) / float(run)
-    return per, rate
-
-
-def paper_scale_estimate(plan: Any, rate: float) -> dict[str, float]:
-    """Core-hours of ``plan`` (reproduce_000.paper_plan): every point to its t_max at its dt,
-    its particle count from W H B phi_bar / <pi d^3/6> of 000's mix, at ``rate``."""
+def _particle_steps(plan: Any) -> Callable[[Any], float]:
+    """A point of ``plan`` (reproduce_000.paper_plan) to its t_max at its dt: its particle
+    count from W H B phi_bar / <pi d^3/6> of 000's mix, times its steps."""
     from granflow.sizes import CHANNEL_MIX
 
     d, f = np.array(CHANNEL_MIX.params[0::2]), np.array(CHANNEL_MIX.params[1::2])
     v = float(np.sum(f * np.pi * d**3 / 6))
-    total = sum(p.W * p.H * p.B * p.phi_bar / v * plan.t_max / p.dt for p in plan.points)
-    return {"runs": len(plan.points), "particle-steps": total,
-            "core-hours": total / rate / 3600}
+    return lambda p: p.W * p.H * p.B * p.phi_bar / v * plan.t_max / p.dt
 
 
 # --------------------------------------------------------------------------------------------
@@ -583,12 +541,21 @@ def _se_section(se: pl.DataFrame, figdir: Path) -> Section:
              "rel_drift), which the whole part's SE contains. The SEs reported above are "
              "the whole part's; a point's first quarter alone would claim a smaller error "
              "than it has.", "", md_table(shrink, {}), ""],
-            [plot_campaign_se(se, figdir / "se_vs_time.png")])
+            [plot_campaign_se(se, figdir / "se_vs_time.png", ("u_slip", "u_max"),
+                              ("W", "phi_bar", "kn", "seed"),
+                              xlabel="steady averaging time T (√(d/g))", relative=True,
+                              target=0.01, label=lambda r: f"W = {r['W']:g}, φ̄ = "
+                              f"{r['phi_bar']:g}, k_n = {r['kn']:.0e}")])
 
 
 def _cost_section(points: pl.DataFrame, paper: Any) -> list[str]:
-    per, rate = cost(points)
-    est = paper_scale_estimate(paper, rate)
+    # (per W: points, particles, preparation and run wall time, core-hours; the throughput
+    # of the runs only)
+    per, rate = cost(points, ["W", "kn"], "n", "steps",
+                     columns=[pl.col("n").max().alias("particles"),
+                              pl.col("prep_seconds").max().alias("longest preparation (s)")],
+                     sort=["kn", "W"], prep="prep_seconds")
+    est = paper_scale_estimate(paper.points, _particle_steps(paper), rate)
     return ["## Cost", "",
             f"Measured throughput {rate:.3g} particle-steps per core-second (one thread "
             "a point, two points at a time on this 2-core machine; preparation not "

@@ -65,10 +65,17 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
+from granflow.analysis.collision import collision_law, head_on_collision
 from granflow.errors import ConfigurationError, InstabilityError, ParameterError
-from granflow.simulation import Box, ContactLaw, Simulation, maxwell_velocities, random_packing
+from granflow.simulation import (
+    Box,
+    ContactLaw,
+    Simulation,
+    contact_time,
+    maxwell_velocities,
+    random_packing,
+)
 from granflow.sizes import mono, uniform
-from granflow.studies.timestep import collision_law, contact_time, head_on_collision
 
 if TYPE_CHECKING:
     from granflow.scenes import Scene
@@ -261,7 +268,7 @@ def energy_balance(trace: Trace) -> dict[str, float]:
 # kernel cases
 # --------------------------------------------------------------------------------------------
 def _collision(law: ContactLaw, d: tuple[float, float] = (1.0, 1.0)) -> Outcome:
-    t_c = contact_time(law, d)
+    t_c = contact_time(law, np.asarray(d, float), 1.0)
     c = head_on_collision(law, t_c / 50, phase=0.37, d=d, t_c=t_c)
     tr = Trace(t=[0.0, c.steps * c.dt], energy=[c.energy_before, c.energy_after],
                power=[0.0, 0.0], max_overlap=[0.0, c.max_overlap],

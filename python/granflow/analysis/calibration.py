@@ -1,0 +1,101 @@
+"""The calibration of a local rheology from stress-controlled cell runs (rows of the cell
+campaign with the gradient-frame columns, rheology.GRADIENT_COLUMNS): mu_g(I_g) in Jop et al.'s
+form and phi(I_g), per cell pressure, with their covariances, as a
+:class:`granflow.continuum.LocalLaw` (granflow.studies.cross_scene runs it)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import polars as pl
+
+from granflow.analysis.rheology import FitResult
+from granflow.analysis.tables import FloatArray
+from granflow.continuum import LocalLaw
+from granflow.errors import ParameterError
+
+
+@dataclass
+class Calibration:
+    """The local law fitted at one cell pressure: the fits (with covariance, scaled by
+    max(1, red chi^2) where the scatter exceeds the SEs) and the pooled points they used."""
+
+    p_ext: float
+    mu_fit: FitResult
+    phi_fit: FitResult
+    law: LocalLaw
+    points: pl.DataFrame
+    #: 002's (4.2) form fitted to the same points, for comparison (not used by the models)
+    mu_power: FitResult | None = None
+
+    def covariances(self) -> tuple[FloatArray, FloatArray]:
+        """The fits' covariances in the law's parameter order (LocalLaw.mu_covariance),
+        scaled by max(1, red chi^2)."""
+        mu, phi = self.mu_fit.cov_scaled, self.phi_fit.cov_scaled
+        return LocalLaw.mu_covariance(mu, self.law.mu_form == "jop"), phi
+
+    def sample(self, n: int, seed: int = 0) -> list[LocalLaw]:
+        """``n`` laws drawn from the fits' covariances (the prediction band)."""
+        mu_cov, phi_cov = self.covariances()
+        return self.law.sample(mu_cov, phi_cov, n, np.random.default_rng(seed))
+
+
+def pooled_points(points: pl.DataFrame) -> pl.DataFrame:
+    """The steady calibration points (flowing and converged), seeds and cell sizes at the
+    same (p_ext, tau/p) pooled inverse-variance (rheology.pool_realizations)."""
+    from granflow.analysis.rheology import pool_realizations
+
+    d = points.filter((pl.col("state") == "flowing") & pl.col("converged"))
+    cols = ["p_ext", "tau_ratio"]
+    keep = [c for c in ("I_g", "mu_g", "phi", "sigma_g_p") for c in (c, f"{c}_se")]
+    return pool_realizations(d.select(*cols, *keep), cols)
+
+
+def calibrate(points: pl.DataFrame) -> dict[float, Calibration]:
+    """Fit mu_g(I_g) and phi(I_g) per cell pressure, with the SE of I_g propagated
+    (effective variance); the law's I range is the pooled points'. mu(I) takes Jop et al.'s
+    form, linear at small I: 002's (4.2), fitted beside it, fits these points worse (its chi^2
+    is in the report) and, with a1 < 1, continues to a yield ratio below the ratios at which
+    the cell arrests. Raises ParameterError when a pressure has fewer than 4 steady points."""
+    from granflow.analysis.rheology import fit_jop, fit_law
+
+    out: dict[float, Calibration] = {}
+    pooled = pooled_points(points)
+    for p in sorted(set(pooled["p_ext"].to_list())):
+        d = pooled.filter(pl.col("p_ext") == p).sort("I_g")
+        if d.height < 4:
+            raise ParameterError(f"invalid calibration at p_ext = {p:g}: {d.height} steady "
+                                 "points, allowed >= 4 (three fitted constants per law)")
+        ig, ig_se = d["I_g"].to_numpy(), d["I_g_se"].to_numpy()
+        mu_fit = fit_jop(ig, d["mu_g"].to_numpy(), d["mu_g_se"].to_numpy(), I_se=ig_se)
+        power = fit_law("mu1", ig, d["mu_g"].to_numpy(), d["mu_g_se"].to_numpy(), I_se=ig_se)
+        phi_fit = fit_law("phi", ig, d["phi"].to_numpy(), d["phi_se"].to_numpy(), I_se=ig_se)
+        if not (mu_fit.success and phi_fit.success):
+            raise ParameterError(f"invalid calibration at p_ext = {p:g}: the fits failed "
+                                 f"({mu_fit.message or phi_fit.message})")
+        law = LocalLaw.from_fits(mu_fit, phi_fit, float(ig.min()), float(ig.max()))
+        out[float(p)] = Calibration(float(p), mu_fit, phi_fit, law, d, power)
+    return out
+
+
+def fits_table(cal: Mapping[float, Calibration]) -> pl.DataFrame:
+    """One row per (pressure, law): constants (named in ``constants``), errors and
+    covariance (row-major, in the constants' order) both scaled by max(1, red chi^2), red
+    chi^2, the I range; the committed ``fits.parquet``."""
+    rows = []
+    for p, c in cal.items():
+        for name, f in (("mu", c.mu_fit), ("phi", c.phi_fit), ("mu (4.2)", c.mu_power)):
+            if f is None:
+                continue
+            (k0, k1, k2) = f.params
+            e = f.errors_scaled
+            rows.append({"p_ext": p, "law": name, "equation": f.equation,
+                         "constants": ", ".join(f.params),
+                         "c0": f.params[k0], "c0_se": e[k0], "A": f.params[k1],
+                         "A_se": e[k1], "a": f.params[k2], "a_se": e[k2],
+                         "red_chi2": f.red_chi2, "n": f.n,
+                         "cov": [float(v) for v in f.cov_scaled.ravel()],
+                         "I_min": c.law.I_min, "I_max": c.law.I_max})
+    return pl.DataFrame(rows)

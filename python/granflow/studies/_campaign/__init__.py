@@ -1,0 +1,29 @@
+"""What the campaign studies share: the engine (:mod:`.engine`: the resumable stint loop and
+:func:`reanalyse`, driven by a :class:`Study`), the command line (:mod:`.command`), the
+reports' helpers (:mod:`.report`), and the cell campaign that reproduce_002, cross_scene and
+seed_coverage run (:mod:`.cell`).
+
+A campaign's dataset is a directory of Parquet tables that grow one finished point at a time:
+a finished point is one row of ``OUT/points.parquet`` holding the point's fields and its
+measurements, and its rows of further tables (``Study.tables``) are appended with it, so a
+campaign that is stopped loses only its unfinished points, which go on from their
+checkpoints under ``OUT/work/``.
+"""
+
+from .command import cli
+from .engine import (
+    Study,
+    done_keys,
+    error_state,
+    fmt,
+    point_of,
+    reanalyse,
+    run_point,
+    run_points,
+    write_rows,
+)
+from .report import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
+
+__all__ = ["Study", "cli", "cost", "dask_recipe", "done_keys", "error_state", "fmt",
+           "md_table", "paper_scale_estimate", "plot_campaign_se", "pm", "point_of",
+           "reanalyse", "run_point", "run_points", "write_rows"]

@@ -1,0 +1,255 @@
+"""The campaign engine: a dataset directory of Parquet tables that grows one finished point at
+a time, and the resumable loop that runs a point in stints.
+
+A study implements :class:`Study` (one instance, picklable: the pool sends it to its
+workers); the loop (:func:`run_point`) is, for each point in ``OUT/work/<key>/``: restore its
+checkpoint and tables, or build and prepare the scene; then stints of
+:meth:`Study.next_steps` steps, each followed by writing the scene's tables, checkpoint and
+``meta.json`` (wall time, preparation time, the stints' states and the row's context), the
+point's row (:meth:`Study.row`) and the one stop rule (:meth:`Study.stop`), which
+:func:`reanalyse` calls too. A :class:`~granflow.errors.GranflowError` ends a point with
+``state`` "runaway" (a :class:`~granflow.errors.DilationError`) or "failed" and the error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import polars as pl
+import pyarrow as pa
+
+from granflow.errors import DilationError, GranflowError
+
+
+def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False) -> None:
+    """Write ``rows`` as the Parquet table ``f`` (atomically), after its rows if ``append``;
+    columns missing from some rows are null there. Nothing is written for no rows."""
+    from granflow import io
+
+    if not rows:
+        return
+    new = pl.from_dicts(list(rows), infer_schema_length=None)
+    if append and f.exists():
+        new = pl.concat([pl.read_parquet(f), new], how="diagonal_relaxed")
+    io.write_parquet(new.to_arrow(), f)
+
+
+def point_of(cls: type, row: Mapping[str, Any]) -> Any:
+    """The point (dataclass ``cls``) a row of ``points.parquet`` was run for."""
+    return cls(**{f.name: row[f.name] for f in dataclasses.fields(cls)})
+
+
+def done_keys(out: Path, cls: type) -> set[str]:
+    """Keys of the points already in ``out/points.parquet``."""
+    f = out / "points.parquet"
+    if not f.exists():
+        return set()
+    return {point_of(cls, r).key for r in pl.read_parquet(f).iter_rows(named=True)}
+
+
+def fmt(row: Mapping[str, Any], key: str, spec: str = ".4g") -> str:
+    """``row[key]`` formatted, ``nan`` when missing (progress lines)."""
+    v = row.get(key)
+    return format(v if v is not None else math.nan, spec)
+
+
+class Study:
+    """What a study gives the engine. A point is a frozen dataclass with a ``key`` property
+    (the name of its work directory); a plan is the study's settings (its stints in time
+    units of the scene, converted to steps by :meth:`next_steps`). Subclasses implement
+    :meth:`scene`, :meth:`next_steps`, :meth:`row` and :meth:`stop`; the rest has defaults."""
+
+    #: rows returned under these keys of a point's row go to ``OUT/<stem>.parquet``
+    tables: Mapping[str, str] = {}
+
+    def scene(self, point: Any, plan: Any, threads: int) -> Any:
+        """The point's scene, built (not yet prepared): the one place a study builds it."""
+        raise NotImplementedError
+
+    def start(self, scene: Any, point: Any, plan: Any, work: Path) -> None:
+        """Prepare a new scene (not called after a restore); ``work`` holds every point's
+        directory (a branch starts from another point's checkpoint there)."""
+        scene.prepare(progress=False)
+
+    def next_steps(self, scene: Any, point: Any, plan: Any) -> int:
+        """Steps of the next stint: the plan's stint, cut at the point's budget; 0 once the
+        budget is spent."""
+        raise NotImplementedError
+
+    def context(self, scene: Any) -> dict[str, Any]:
+        """What :meth:`row` needs beyond the tables (kept in ``meta.json``, for
+        :func:`reanalyse`)."""
+        return {}
+
+    def progress(self, scene: Any, prep_seconds: float) -> dict[str, Any]:
+        """How far the point ran (steps, time, ...): fields the row ends with (before
+        ``wall_seconds``), and that :meth:`stop` reads."""
+        return {}
+
+    def row(self, point: Any, plan: Any, tables: Mapping[str, pa.Table],
+            context: Mapping[str, Any]) -> dict[str, Any]:
+        """The point's row from its tables: the point's fields, ``state``, ``converged`` and
+        the measurements; the rows of further tables under the keys of :attr:`tables`."""
+        raise NotImplementedError
+
+    def failure(self, scene: Any, context: Mapping[str, Any]) -> dict[str, Any]:
+        """Further fields of the row of a point that ended with an error."""
+        return {}
+
+    def stop(self, row: Mapping[str, Any], point: Any, plan: Any,
+             history: Sequence[str]) -> str | None:
+        """Why the point is done after the stint that gave ``row`` (with its :meth:`progress`
+        fields), e.g. "converged", "arrested" or "budget"; None to go on. ``history``: the
+        states of the earlier stints, oldest first."""
+        raise NotImplementedError
+
+
+def error_state(exc: GranflowError) -> str:
+    """The state of a point ended by ``exc``: "runaway" for the cell's runaway dilation,
+    "failed" for any other error."""
+    return "runaway" if isinstance(exc, DilationError) else "failed"
+
+
+def _read_tables(d: Path) -> dict[str, pa.Table]:
+    import pyarrow.parquet as pq
+
+    return {f.stem: pq.read_table(f) for f in sorted(d.glob("*.parquet"))}
+
+
+def run_point(study: Study, point: Any, plan: Any, work: str,
+              threads: int = 1) -> dict[str, Any]:
+    """Run (or go on with) ``point`` in ``work/<key>`` in stints until ``study.stop`` says it
+    is done or the budget is spent (``study.next_steps`` gives 0); returns its row."""
+    from granflow import io
+
+    d = Path(work) / point.key
+    d.mkdir(parents=True, exist_ok=True)
+    ck, meta = d / "checkpoint.gfck", d / "meta.json"
+    scene = study.scene(point, plan, threads)
+    info: dict[str, Any] = {"wall_seconds": 0.0, "prep_seconds": math.nan}
+    restored = ck.exists() and meta.exists()
+    if restored:
+        scene.restore(ck)
+        scene.load_tables(_read_tables(d))
+        info.update(json.loads(meta.read_text()))
+    t0 = time.perf_counter()
+    if not restored:
+        study.start(scene, point, plan, Path(work))
+        info["prep_seconds"] = time.perf_counter() - t0
+    context = study.context(scene)
+    history: list[str] = list(info.get("history", []))
+
+    def wall() -> float:
+        return float(info["wall_seconds"]) + time.perf_counter() - t0
+
+    def write_meta() -> None:
+        meta.write_text(json.dumps({**info, "wall_seconds": wall(), "history": history,
+                                    "context": context}))
+
+    error: GranflowError | None = None
+    row: dict[str, Any] = {}
+    try:
+        while (steps := study.next_steps(scene, point, plan)) > 0:
+            scene.run(steps, progress=False)
+            for name, tab in scene.tables().items():
+                io.write_parquet(tab, d / f"{name}.parquet")
+            scene.save_checkpoint(ck)
+            write_meta()  # (a checkpoint is never without its meta, even before the row)
+            row = study.row(point, plan, scene.tables(), context)
+            row.update(study.progress(scene, info["prep_seconds"]))
+            done = study.stop(row, point, plan, history)
+            history.append(str(row["state"]))
+            write_meta()
+            if done is not None:
+                break
+    except GranflowError as exc:
+        error = exc
+    if error is not None or not row:
+        row = study.row(point, plan, scene.tables(), context)
+    if error is not None:
+        row.update(state=error_state(error), error=f"{type(error).__name__}: {error}",
+                   converged=False, **study.failure(scene, context),
+                   **{k: [] for k in study.tables})
+    row.update(study.progress(scene, info["prep_seconds"]), wall_seconds=wall())
+    return row
+
+
+def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -> int:
+    """Recompute the rows of ``out/points.parquet`` (and its other tables) from the tables kept
+    in ``out/work`` (after a change of the analysis), with the rows' :meth:`Study.progress`
+    fields as they were; a point the stop rule no longer stops is dropped, so that the next
+    run goes on with it from its checkpoint. Points that ended with an error, or without a
+    work directory, are kept as they are. Returns the number of points dropped."""
+    outp = Path(out)
+    keep: list[dict[str, Any]] = []
+    extra: dict[str, list[dict[str, Any]]] = {k: [] for k in study.tables}
+    dropped = 0
+    for old in pl.read_parquet(outp / "points.parquet").iter_rows(named=True):
+        point = point_of(cls, old)
+        d = outp / "work" / point.key
+        if not (d / "meta.json").exists() or old["state"] in ("runaway", "failed"):
+            keep.append(old)
+            continue
+        info = json.loads((d / "meta.json").read_text())
+        row = {**old, **study.row(point, plan, _read_tables(d), _context(info, d))}
+        # (a work directory from before the engine kept no history: the loop had stopped on
+        # the old row's state, so that was the earlier stint's too)
+        earlier = info["history"][:-1] if "history" in info else [old["state"]]
+        if study.stop(row, point, plan, earlier) is None:
+            dropped += 1
+            continue
+        for k in study.tables:
+            extra[k] += row.pop(k)
+        keep.append(row)
+    write_rows(outp / "points.parquet", keep)
+    for k, stem in study.tables.items():
+        write_rows(outp / f"{stem}.parquet", extra[k])
+    return dropped
+
+
+def _context(info: Mapping[str, Any], d: Path) -> dict[str, Any]:
+    """The row's context kept in ``meta.json``; for a work directory from before the engine,
+    the checkpoint header's metadata (the cell's ``shear_start_time``)."""
+    if "context" in info:
+        return dict(info["context"])
+    from granflow import _core
+
+    try:
+        header = _core.read_checkpoint_header(os.fspath(d / "checkpoint.gfck"))[1]
+    except GranflowError:
+        return {}
+    return dict(json.loads(header or "{}"))
+
+
+def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.PathLike[str], *,
+               workers: int | None = None, scheduler: str | None = None,
+               describe: Callable[[dict[str, Any]], str] = str,
+               log: Callable[[str], Any] = print, name: str = "campaign") -> pl.DataFrame:
+    """Run (:func:`run_point`) the ``points`` not yet in ``out/points.parquet`` (local process
+    pool by default, or a Dask scheduler); each finished row is appended there at once, and the
+    list of rows under each key ``k`` of ``study.tables`` to ``out/<study.tables[k]>.parquet``.
+    Returns the whole points table."""
+    from granflow.study import map_tasks
+
+    outp = Path(out)
+    outp.mkdir(parents=True, exist_ok=True)
+    cls = type(points[0]) if points else object
+    done = done_keys(outp, cls) if points else set()
+    todo = [p for p in points if p.key not in done]
+    log(f"{name}: {len(points)} points, {len(points) - len(todo)} done, {len(todo)} to run")
+    args = [(study, p, plan, str(outp / "work")) for p in todo]
+    for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler):
+        extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
+        write_rows(outp / "points.parquet", [row], append=True)
+        for stem, rows in extras.items():
+            write_rows(outp / f"{stem}.parquet", rows, append=True)
+        log(f"  {point_of(cls, row).key}: {describe(row)}")
+    f = outp / "points.parquet"
+    return pl.read_parquet(f) if f.exists() else pl.DataFrame()

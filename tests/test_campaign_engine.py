@@ -1,0 +1,157 @@
+"""The campaign engine (granflow.studies._campaign.engine) on a scripted scene, in seconds: the
+stint loop, its one stop rule (run and reanalyse alike), resuming, and errors by type."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import polars as pl
+import pyarrow as pa
+import pytest
+from granflow.errors import DilationError, InstabilityError, ParameterError
+from granflow.studies._campaign import Study, reanalyse, run_point, run_points
+
+
+@dataclass(frozen=True)
+class Point:
+    name: str
+    #: stints after which the scripted flow arrests (0: never)
+    arrest_at: int = 0
+    #: stint during which the scene raises ``raises`` (0: never)
+    fail_at: int = 0
+    raises: str = ""
+
+    @property
+    def key(self) -> str:
+        return self.name
+
+
+@dataclass(frozen=True)
+class Plan:
+    stint: float = 1.0  # time units
+    t_max: float = 10.0
+    dt: float = 0.25
+
+
+ERRORS = {"dilation": DilationError, "instability": InstabilityError,
+          "parameter": ParameterError}
+
+
+class Scene:
+    """A scripted scene: a sample per step of its time; stint ``fail_at`` raises ``raises``."""
+
+    def __init__(self, point: Point, plan: Plan) -> None:
+        self.point, self.plan = point, plan
+        self.t: list[float] = []
+        self.time, self.prepared, self.stints = 0.0, False, 0
+
+    def prepare(self, progress: bool | None = None) -> None:
+        self.prepared = True
+
+    def run(self, steps: int, progress: bool | None = None) -> None:
+        self.stints += 1
+        for _ in range(steps):
+            self.time += self.plan.dt
+            self.t.append(self.time)
+            if self.stints == self.point.fail_at and len(self.t) % 4 == 2:
+                raise ERRORS[self.point.raises]("scripted")
+
+    def tables(self) -> dict[str, pa.Table]:
+        return {"series": pa.table({"t": pa.array(self.t, pa.float64())})}
+
+    def load_tables(self, tables: Mapping[str, pa.Table]) -> None:
+        self.t = tables["series"].column("t").to_pylist()
+
+    def save_checkpoint(self, path: Path) -> None:
+        Path(path).write_text(json.dumps({"time": self.time, "stints": self.stints}))
+
+    def restore(self, path: Path) -> None:
+        d = json.loads(Path(path).read_text())
+        self.time, self.stints, self.prepared = d["time"], d["stints"], True
+
+
+class Scripted(Study):
+    tables = {"sample_rows": "samples"}
+
+    def scene(self, point: Point, plan: Plan, threads: int) -> Scene:
+        return Scene(point, plan)
+
+    def next_steps(self, scene: Scene, point: Point, plan: Plan) -> int:
+        left = round((plan.t_max - scene.time) / plan.dt)
+        return min(round(plan.stint / plan.dt), left) if left > 0 else 0
+
+    def progress(self, scene: Scene, prep_seconds: float) -> dict[str, Any]:
+        return {"t_run": scene.time, "stints": scene.stints}
+
+    def row(self, point: Point, plan: Plan, tables: Mapping[str, pa.Table],
+            context: Mapping[str, Any]) -> dict[str, Any]:
+        t = tables["series"].column("t").to_pylist()
+        stints = round(len(t) * plan.dt / plan.stint)
+        arrested = 0 < point.arrest_at <= stints
+        return {**asdict(point), "state": "arrested" if arrested else "flowing",
+                "converged": False, "samples": len(t),
+                "sample_rows": [{"name": point.name, "t": x} for x in t[-2:]]}
+
+    def stop(self, row: Mapping[str, Any], point: Point, plan: Plan,
+             history: Sequence[str]) -> str | None:
+        if row["state"] == "arrested" and history[-1:] == ["arrested"]:
+            return "arrested"
+        return "budget" if row["t_run"] >= plan.t_max - 1e-9 else None
+
+
+POINTS = (Point("runs_out"), Point("arrests", arrest_at=3),
+          Point("dilates", fail_at=2, raises="dilation"),
+          Point("unstable", fail_at=3, raises="instability"),
+          Point("bad", fail_at=1, raises="parameter"))
+
+
+@pytest.fixture()
+def campaign(tmp_path: Path) -> tuple[Path, pl.DataFrame]:
+    d = run_points(Scripted(), POINTS, Plan(), tmp_path, workers=1, log=lambda *_: None)
+    return tmp_path, d
+
+
+def test_the_loop_stops_by_the_rule_and_classifies_errors_by_type(campaign):
+    out, d = campaign
+    rows = {r["name"]: r for r in d.iter_rows(named=True)}
+    assert rows["runs_out"]["state"] == "flowing" and rows["runs_out"]["t_run"] == 10.0
+    # arrested from the third stint on: stopped at the second stint running (the fourth)
+    assert rows["arrests"]["state"] == "arrested" and rows["arrests"]["stints"] == 4
+    assert rows["dilates"]["state"] == "runaway"  # by the exception's type, not its words
+    assert rows["dilates"]["error"] == "DilationError: scripted"
+    assert rows["unstable"]["state"] == "failed" and rows["bad"]["state"] == "failed"
+    assert rows["unstable"]["error"].startswith("InstabilityError")
+    assert rows["runs_out"]["error"] is None and not any(rows[k]["converged"] for k in rows)
+    assert all(r["wall_seconds"] > 0 for r in rows.values())
+    # the rows of further tables: none from a point that ended with an error
+    s = pl.read_parquet(out / "samples.parquet")
+    assert set(s["name"].to_list()) == {"runs_out", "arrests"}
+    meta = json.loads((out / "work" / "arrests" / "meta.json").read_text())
+    assert meta["history"] == ["flowing", "flowing", "arrested", "arrested"]
+
+
+def test_a_finished_point_is_not_run_again_and_an_unfinished_one_goes_on(campaign):
+    out, d = campaign
+    said: list[str] = []
+    run_points(Scripted(), POINTS, Plan(), out, workers=1, log=said.append)
+    assert said == [f"campaign: {len(POINTS)} points, {len(POINTS)} done, 0 to run"]
+    # a longer budget: the point goes on from its checkpoint (4 more stints)
+    row = run_point(Scripted(), POINTS[0], Plan(t_max=14.0), str(out / "work"))
+    assert row["t_run"] == 14.0 and row["stints"] == 14 and row["samples"] == 56
+
+
+def test_reanalyse_calls_the_same_stop_rule(campaign):
+    out, d = campaign
+    assert reanalyse(Scripted(), Point, Plan(), out) == 0
+    again = pl.read_parquet(out / "points.parquet")
+    assert again.equals(d)
+    assert pl.read_parquet(out / "samples.parquet").height == 4
+    # with a longer budget the point that ran out is not done: dropped, to go on; the
+    # arrested point stays arrested (its two stints running, from the kept history)
+    assert reanalyse(Scripted(), Point, Plan(t_max=20.0), out) == 1
+    names = pl.read_parquet(out / "points.parquet")["name"].to_list()
+    assert "runs_out" not in names and "arrests" in names
