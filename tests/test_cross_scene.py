@@ -15,7 +15,7 @@ from granflow.analysis import channel_model as cm
 from granflow.analysis import rheology as rh
 from granflow.continuum import LocalLaw
 from granflow.errors import ParameterError
-from granflow.scenes.cell import contact_time
+from granflow.material import MATERIAL_000
 from granflow.studies import cross_scene as cs
 
 CHANNEL = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
@@ -52,13 +52,18 @@ def test_jop_fit_recovers_its_constants_and_their_errors():
 
 def test_the_cell_takes_the_channels_material():
     mat = cs.channel_material()
-    assert mat["size_mix"] == {0.9: 0.3, 1.0: 0.4, 1.1: 0.3}
-    assert mat["kt_ratio"] == pytest.approx(2 / 7) and mat["e_n"] == 0.82
-    # the channel's dt per contact time: 1.2e-4 sqrt(1e6/kn) at the mean pair's t_c
+    assert mat.sizes == MATERIAL_000.sizes
+    assert mat.sizes.params == (0.9, 0.3, 1.0, 0.4, 1.1, 0.3)
+    law = mat.law()
+    assert law.kt / law.kn == pytest.approx(2 / 7) and law.e_n == 0.82 and law.mu == 0.5
+    # the channel's dt per contact time: 1.2e-4 sqrt(1e6/kn) at the mean pair's collision time
+    assert mat.dt_rule is not None and mat.dt_rule.kind == "tc_fraction"
     m = np.pi / 6 * (0.3 * 0.9**3 + 0.4 + 0.3 * 1.1**3)
     for kn in (1e5, 1e6, 1e7):
         dt = 1.2e-4 * math.sqrt(1e6 / kn)
-        assert mat["dt_frac"] * contact_time(kn, m / 2, "collision", 0.82) == pytest.approx(dt)
+        tc = math.sqrt(math.pi**2 + math.log(0.82) ** 2) / math.sqrt(kn / (m / 2))
+        assert mat.dt_rule.value * tc == pytest.approx(dt)
+        assert mat.with_(kn=kn).dt() == pytest.approx(dt)
 
 
 def test_a_calibration_needs_four_steady_points():

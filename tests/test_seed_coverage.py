@@ -15,7 +15,7 @@ from granflow.scenes.cell import ShearCell
 def test_the_cells_ses_cover_the_seed_to_seed_spread():
     runs = []
     for seed in range(1, 9):
-        c = ShearCell(N=300, mu_s=0.3, p_ext=1e-4, tau_ratio=0.5, seed=seed, sample_every=200,
+        c = ShearCell(N=300, mu=0.3, p_ext=1e-4, tau_ratio=0.5, seed=seed, sample_every=200,
                       threads=1)
         c.run(200_000)
         s = pl.from_arrow(c.tables()["series"])

@@ -84,6 +84,16 @@ def kernel_default_skin() -> float:
     return float(inspect.signature(_core.box_sim).parameters["skin"].default)
 
 
+def law_contact_time(law: ContactLaw, diameters: np.ndarray, density: float = 1.0) -> float:
+    """The contact time of the lightest pair of ``diameters`` under ``law`` (any law, a rate
+    damping ``xi_n`` included), as the kernel computes it (``Sim.contact_time``: linear law,
+    reduced mass m_min/2): what :meth:`Material.contact_time` gives for ``pair="lightest"``."""
+    d = np.asarray(diameters, dtype=float)
+    _need(d.size > 0, "diameters", d.tolist(), "at least one particle")
+    m_min = density * np.pi / 6.0 * float(np.min(d)) ** 3
+    return float(_core.contact_time(law.as_dict(), 0.5 * m_min))
+
+
 def _need(cond: bool, name: str, value: Any, allowed: str) -> None:
     if not cond:
         raise ParameterError(f"invalid {name} = {value!r}: allowed {allowed}")
@@ -234,9 +244,8 @@ class Material:
         reading = self.tc_reading if reading is None else reading
         _need(reading in TC_READINGS, "tc_reading", reading, f"one of {TC_READINGS}")
         if pair == "lightest":
-            d_min = self.sizes.min if diameters is None else float(np.min(diameters))
-            m_min = self.density * np.pi / 6.0 * d_min**3
-            return float(_core.contact_time(self.law(diameters).as_dict(), 0.5 * m_min))
+            d = np.array([self.sizes.min]) if diameters is None else diameters
+            return law_contact_time(self.law(diameters), d, self.density)
         kn = self.kn_value
         m_e = self.mean_mass(diameters) / 2
         if self.gamma_n_tc is not None and reading == "printed":
@@ -298,4 +307,5 @@ __all__ = [
     "PAIRS",
     "TC_READINGS",
     "kernel_default_skin",
+    "law_contact_time",
 ]

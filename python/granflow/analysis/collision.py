@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from granflow.errors import GranflowError, ParameterError
-from granflow.simulation import Box, ContactLaw, Simulation, contact_time
+from granflow.material import law_contact_time
+from granflow.simulation import Box, ContactLaw, Simulation
 
 
 @dataclass
@@ -56,7 +57,7 @@ def head_on_collision(
     The initial gap is ``v0 dt (m + phase)`` with ``m = round(gap_tc t_c / dt)``, so the contact
     starts at the fraction ``phase`` of a step. The run advances in chunks of about ``t_c/4``
     straight on the kernel handle (no progress bar); ``wall_time`` is the time spent in them.
-    ``t_c`` (default: the kernel's for the pair, simulation.contact_time) saves the probe
+    ``t_c`` (default: the kernel's for the pair, material.law_contact_time) saves the probe
     simulation when already known.
     """
     if not 0.0 <= phase < 1.0:
@@ -64,7 +65,7 @@ def head_on_collision(
     if not (math.isfinite(v0) and v0 > 0):
         raise ParameterError(f"invalid v0 = {v0}: allowed > 0")
     if t_c is None:
-        t_c = contact_time(law, np.asarray(d, float), density)
+        t_c = law_contact_time(law, np.asarray(d, float), density)
     dt = t_c / 50 if dt is None else float(dt)
     m = max(1, round(gap_tc * t_c / dt))
     gap = v0 * dt * (m + phase)

@@ -177,6 +177,8 @@ class Channel:
     scene_name: ClassVar[str]
     #: the runner writes the statistical-error report of a finished run
     error_report: ClassVar[bool] = True
+    #: gravity along -y, of unit magnitude (the unit of acceleration, g)
+    gravity: ClassVar[tuple[float, float, float]] = (0.0, -1.0, 0.0)
 
     def __post_init__(self) -> None:
         self.material = resolve_material(self.material, MATERIAL_000, material_overrides(self))
@@ -346,7 +348,7 @@ class Channel:
         walls = [Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0), Wall(1, 0.0, 1.0)]
         dt = soft.contact_time("lightest", d) / POUR_DT_DIVISOR
         box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
-        sim = Simulation(x, d, box, prep_law, walls=walls, gravity=(0.0, -1.0, 0.0), dt=dt,
+        sim = Simulation(x, d, box, prep_law, walls=walls, gravity=self.gravity, dt=dt,
                          threads=self.threads, density=self.mat.density, skin=self.mat.skin)
         m = sim.core.masses()
         say(f"inserted {len(d)} spheres at phi = {PHI_INSERT} in a {self.W:g} x {h_fill:.4g} x "
@@ -403,7 +405,7 @@ class Channel:
         stiff = self._relax_material(self.mat.kn_value)
         rel_box = Box(length=(self.W, p.h_fill, self.B), periodic=(False, False, True))
         stiff_sim = Simulation(x, p.d, rel_box, stiff.law(), walls=p.walls,
-                               gravity=(0.0, -1.0, 0.0),
+                               gravity=self.gravity,
                                dt=stiff.contact_time("lightest", p.d) / POUR_DT_DIVISOR,
                                threads=self.threads, density=self.mat.density,
                                skin=self.mat.skin)
@@ -454,7 +456,7 @@ class Channel:
         self._sim = Simulation(
             x, d, Box(length=(self.W, self.H, self.B), periodic=(False, True, True)), self.law,
             density=self.mat.density, walls=[Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0)],
-            wall_law=self.wall_law, gravity=(0.0, -1.0, 0.0), dt=self.timestep,
+            wall_law=self.wall_law, gravity=self.gravity, dt=self.timestep,
             skin=self.mat.skin, threads=self.threads,
         )
         self.prep_info = dict(prep_info)

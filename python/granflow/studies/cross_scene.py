@@ -53,9 +53,9 @@ def _plan(name: str, points: Iterable[Point], stint_steps: int,
           max_shear_steps: Mapping[int, int], **kw: Any) -> Plan:
     """A calibration plan with its stint and budgets given in steps (the channel's dt, the
     calibration's committed stints), as the plan's contact times."""
-    opts = channel_material()
-    f = opts["dt_frac"]
-    return Plan(name, tuple(dict.fromkeys(points)), cell_options=opts,
+    mat = channel_material()
+    f = Plan(name, (), material=mat).dt
+    return Plan(name, tuple(dict.fromkeys(points)), material=mat,
                 observables=CAL_OBSERVABLES, stint=stint_steps * f,
                 max_shear={n: s * f for n, s in max_shear_steps.items()}, **kw)
 

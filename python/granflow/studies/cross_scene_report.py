@@ -303,6 +303,10 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
           if (out / "se_vs_time.parquet").exists() else pl.DataFrame())
     wall = float(points["wall_seconds"].sum())
     mat = channel_material()
+    law = mat.law()
+    assert law.kn is not None and law.kt is not None and law.e_n is not None
+    mix = dict(zip(mat.sizes.params[0::2], mat.sizes.params[1::2], strict=True))
+    dt_frac = mat.dt_rule.value if mat.dt_rule is not None else math.nan
     states = ", ".join(f"{k} {v}" for k, v in sorted(points["state"].value_counts().iter_rows()))
     lo = pred.cal[min(pred.cal)].law
     pooled = pl.concat([c.points for c in pred.cal.values()])
@@ -322,9 +326,9 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         f"* fits, continuum solutions, bands and amplitude fits: {pred.seconds:.0f} s.", "",
         "## 1. Calibration in the cell, with the channel's material", "",
         "granflow.scenes.cell.ShearCell (stress-controlled, compacted start) with the channel's "
-        f"particles and law, read from the Channel scene's defaults: sizes {mat['size_mix']} "
-        f"(number fractions), kt/kn = {mat['kt_ratio']:.4f}, e_n = {mat['e_n']:g}, mu = 0.5, "
-        f"tangential damping 1/2 of the normal, dt = {mat['dt_frac']:.4f} t_c (the channel's "
+        f"particles and law, read from the Channel scene's defaults: sizes {mix} "
+        f"(number fractions), kt/kn = {law.kt / law.kn:.4f}, e_n = {law.e_n:g}, mu = 0.5, "
+        f"tangential damping 1/2 of the normal, dt = {dt_frac:.4f} t_c (the channel's "
         f"dt per contact time), at p d/kn = "
         + ", ".join(f"{p:g}" for p in sorted(pred.cal))
         + " (the channel's sigma_xx d/kn runs from "

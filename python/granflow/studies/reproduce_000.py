@@ -44,6 +44,7 @@ import polars as pl
 import pyarrow as pa
 
 from granflow.analysis.estimate import Estimate
+from granflow.material import MATERIAL_000
 
 from ._campaign import Study, done_keys, fmt, run_points
 from ._campaign import reanalyse as engine_reanalyse
@@ -83,8 +84,11 @@ class Point:
 
     @property
     def dt(self) -> float:
-        """1.2e-4 sqrt(1e6/k_n): 000's step at k_n = 1e6 (~t_c/11), scaled with t_c."""
-        return 1.2e-4 * math.sqrt(1e6 / self.kn)
+        """000's step at this k_n (the material's rule: 1.2e-4 at k_n = 1e6, ~t_c/11, scaled
+        with t_c)."""
+        dt = MATERIAL_000.with_(kn=self.kn).dt()
+        assert dt is not None
+        return dt
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ nan_free, measured, n, steps, sim_time.
   ``dissipation`` D = W - delta_energy (inferred), ``energy_balance`` = D / max(E_start, E_end,
   |W|), and ``energy_ok`` is False when ``energy_balance < -tol`` (energy created beyond the
   case's tolerance: an energy-balance violation). Null when the case has no source-work model.
-* The cell (002) reports its own ledger (:func:`granflow.scenes.cell.energy_balance`, sampled every
+* The cell (002) reports its own ledger (:func:`granflow.scenes.cell_energy_balance`, sampled every
   step over the last ``CELL_LEDGER_TC`` contact times of the run): ``work`` is the imposed
   stress's work -p_ext dV + tau_ext V L_xy dt, E includes the cell's kinetic energy,
   ``energy_balance`` = D / max(|W|, |D|, gross contact work) (the cell stores little energy;
@@ -67,11 +67,11 @@ import pyarrow as pa
 
 from granflow.analysis.collision import collision_law, head_on_collision
 from granflow.errors import ConfigurationError, InstabilityError, ParameterError
+from granflow.material import law_contact_time
 from granflow.simulation import (
     Box,
     ContactLaw,
     Simulation,
-    contact_time,
     maxwell_velocities,
     random_packing,
 )
@@ -186,9 +186,7 @@ def _energy(core: Any) -> float:
 
 
 def _gravity(obj: Any) -> np.ndarray | None:
-    g = getattr(obj, "gravity", None)
-    if g is None and hasattr(obj, "sim"):
-        g = getattr(obj.sim, "gravity", None)
+    g = getattr(obj, "gravity", None)  # a Simulation's, or a scene's (the channel's)
     return None if g is None else np.asarray(g, dtype=float)
 
 
@@ -268,7 +266,7 @@ def energy_balance(trace: Trace) -> dict[str, float]:
 # kernel cases
 # --------------------------------------------------------------------------------------------
 def _collision(law: ContactLaw, d: tuple[float, float] = (1.0, 1.0)) -> Outcome:
-    t_c = contact_time(law, np.asarray(d, float), 1.0)
+    t_c = law_contact_time(law, np.asarray(d, float), 1.0)
     c = head_on_collision(law, t_c / 50, phase=0.37, d=d, t_c=t_c)
     tr = Trace(t=[0.0, c.steps * c.dt], energy=[c.energy_before, c.energy_after],
                power=[0.0, 0.0], max_overlap=[0.0, c.max_overlap],
@@ -396,14 +394,15 @@ def _channel(params: Mapping[str, Any], sim_time: float, n_samples: int = 50) ->
 def _cell(p: float, tau_over_p: float, time_tc: float = 2000.0,
           ledger_tc: float = CELL_LEDGER_TC) -> Outcome:
     """The stress-controlled cell (002) at ``p_ext`` = p (units kn/a) and tau_ext/p_ext, run
-    for ``time_tc`` contact times from its dilute start (records mu1, phi, I over the second
-    half), then ``ledger_tc`` more with the energy ledger (granflow.scenes.cell.energy_balance)."""
-    from granflow.scenes.cell import ShearCell
-    from granflow.scenes.cell import energy_balance as cell_energy_balance
+    for ``time_tc`` contact times after its compaction under p_ext (records mu1, phi, I over
+    the second half of its series, compaction included), then ``ledger_tc`` more with the
+    energy ledger (granflow.scenes.cell_energy_balance)."""
+    from granflow.scenes import ShearCell, cell_energy_balance
 
     cell = ShearCell.from_spec({**SMALL_CELL, "p_ext": p, "tau_ratio": tau_over_p}, seed=0)
+    cell.prepare()
     core = cell.core
-    t_c = float(getattr(cell, "t_c", core.contact_time))
+    t_c = float(cell.t_c)
     steps = max(1, round(time_tc * t_c / core.dt))
     vs = float(np.sum(np.pi * np.asarray(core.diameters()) ** 3 / 6))
 

@@ -40,8 +40,8 @@ import polars as pl
 
 from granflow.analysis.collision import collision_law, head_on_collision
 from granflow.errors import GranflowError, ParameterError
+from granflow.material import DtRule, law_contact_time
 from granflow.simulation import Box, ContactLaw, Simulation
-from granflow.simulation import contact_time as simulation_contact_time
 
 if TYPE_CHECKING:
     from granflow.scenes import Scene
@@ -97,7 +97,7 @@ def contact_time(law: ContactLaw, d: tuple[float, float] = (1.0, 1.0),
                  density: float = 1.0) -> float:
     """``t_c`` the kernel uses for a pair of diameters ``d`` under ``law`` (raises
     :class:`granflow.ParameterError` for an over-damped rate ``xi_n``)."""
-    return simulation_contact_time(law, np.asarray(d, float), density)
+    return law_contact_time(law, np.asarray(d, float), density)
 
 
 def binary_collision_study(
@@ -346,17 +346,17 @@ def sheared_packing_study(
     threads: int | None = None,
 ) -> pl.DataFrame:
     """:func:`scene_study` on a sheared packing in the stress-controlled cell
-    (``granflow.scenes.cell.ShearCell``, paper 002, whose ``dt = dt_frac t_c`` with the cell's
+    (``granflow.scenes.cell.ShearCell``, paper 002, whose ``dt = f t_c`` with the cell's
     ``t_c``, the collision time of two mean particles; the default ``fracs`` start at 12, since
     the kernel refuses dt above t_c/10 of its lightest pair, ~t_c/11.8 of the mean pair).
 
-    Every timestep ``t_c/f`` runs the same scene (same seed: the same dilute start) at
-    ``dt_frac = 1/f``: ``warmup_tc`` contact times of compaction and start-up of the shear
-    flow under ``p_ext`` and ``tau_ratio`` (untimed), then the timed ``time_tc`` contact times
-    whose samples (every ``sample_tc`` contact times, so at the same times for every ``dt``)
-    give the observables: by default the means of mu1, phi and I of the ``series`` table
-    (docs/columns.md) with their blocking SEs. A sheared packing is chaotic, so runs at
-    different ``dt`` decorrelate within a few contact times and a warm start from one
+    Every timestep ``t_c/f`` runs the same scene (same seed: the same dilute start) with the
+    material's dt rule ``DtRule.tc_fraction(1/f)``: ``warmup_tc`` contact times of compaction
+    and start-up of the shear flow under ``p_ext`` and ``tau_ratio`` (untimed), then the timed
+    ``time_tc`` contact times whose samples (every ``sample_tc`` contact times, so at the same
+    times for every ``dt``) give the observables: by default the means of mu1, phi and I of the
+    ``series`` table (docs/columns.md) with their blocking SEs. A sheared packing is chaotic, so
+    runs at different ``dt`` decorrelate within a few contact times and a warm start from one
     checkpoint would not keep them together; the comparison is therefore between steady
     averages, and a deviation is discretisation error only where it clearly exceeds the SEs
     (lengthen ``time_tc`` to resolve smaller errors). ``params`` go to ``ShearCell.from_spec``
@@ -367,20 +367,21 @@ def sheared_packing_study(
     cls = _cell_class()
     base = {"N": 250, **dict(params or {})}
     try:
-        probe = cls.from_spec(base, seed=seed, threads=threads)
+        probe: Any = cls.from_spec(base, seed=seed, threads=threads)
     except AttributeError as exc:
         if "granflow._core" not in str(exc):
             raise
         raise GranflowError(
             f"the kernel in this build has no cell support yet ({exc}): rebuild granflow"
         ) from exc
-    t_c = float(getattr(probe, "t_c", None) or probe.core.contact_time)
+    t_c = float(probe.t_c)
 
     def factory(dt: float | None) -> Any:
         p = dict(base)
         if dt is not None:
             f = t_c / dt
-            p.update(dt_frac=1.0 / f, sample_every=max(1, round(sample_tc * f)))
+            p.update(material=probe.mat.with_(dt_rule=DtRule.tc_fraction(1.0 / f)),
+                     sample_every=max(1, round(sample_tc * f)))
         return cls.from_spec(p, seed=seed, threads=threads)
 
     def warm(scene: Any) -> None:

@@ -4,7 +4,8 @@ cell run, (mu_s, N, p_ext, tau/p, seed), from the compacted start
 strain of ``min_strain`` and the blocking SEs of mu1 and phi are within ``se_target`` of their
 means, that of I within 3x (SE_TARGETS), or its budget of shear (``max_shear``) is spent, or it
 arrested over ARREST_STINTS stints, or it ran away. Times (stints, budgets) are in contact
-times t_c, the cell's unit: a stint of ``stint`` t_c is ``round(stint / dt_frac)`` steps.
+times t_c, the cell's unit: a stint of ``stint`` t_c is ``round(stint / f)`` steps at the
+material's dt = f t_c.
 
 Its row: the point, its state, steps, wall seconds, and mean / SE / correlation time of every
 observable; the SE of I, phi, mu1 over the first quarter, half and all of its steady part go
@@ -13,7 +14,6 @@ to ``OUT/se_vs_time.parquet``.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -23,6 +23,9 @@ from typing import Any
 import numpy as np
 import polars as pl
 import pyarrow as pa
+
+from granflow.errors import ParameterError
+from granflow.material import MATERIAL_000, MATERIAL_002, DtRule, Material
 
 from .engine import Study, fmt, run_points
 from .engine import reanalyse as engine_reanalyse
@@ -72,18 +75,20 @@ class Plan:
     #: shear strain (2 |D| T, engineering) the steady part must span: an SE target is easily
     #: met by a short stretch of a slow flow (p = 1e-5 met it after 0.3 of strain, dilating)
     min_strain: float = 2.0
-    #: the cell's material beyond (mu_s, N, p_ext, tau/p): ShearCell keywords (e.g. the
-    #: channel's size_mix, kt_ratio, e_n, dt_frac in granflow.studies.cross_scene)
-    cell_options: Mapping[str, Any] = field(default_factory=dict)
+    #: the cell's material (the point's mu_s overrides its friction; 002's by default, the
+    #: channel's in granflow.studies.cross_scene); its dt rule must be a fraction of t_c
+    material: Material = MATERIAL_002
     #: observables kept per point (OBSERVABLES, and rheology.GRADIENT_COLUMNS if wanted)
     observables: tuple[str, ...] = OBSERVABLES
 
     @property
     def dt(self) -> float:
-        """The step in t_c (the cell's ``dt_frac``)."""
-        from granflow.scenes.cell import ShearCell
-
-        return float(self.cell_options.get("dt_frac", ShearCell.dt_frac))
+        """The step in t_c (the material's dt rule, a fraction of t_c)."""
+        rule = self.material.dt_rule
+        if rule is None or rule.kind != "tc_fraction":
+            raise ParameterError(f"invalid material.dt_rule = {rule!r}: allowed a fraction of "
+                                 "t_c (DtRule.tc_fraction), the unit of the plan's times")
+        return float(rule.value)
 
     def steps(self, t: float) -> int:
         """Steps in ``t`` contact times (at least one)."""
@@ -98,25 +103,16 @@ class Plan:
         return {k: f * self.se_target for k, f in SE_TARGETS.items()}
 
 
-def channel_material() -> dict[str, Any]:
-    """The channel's material as cell options (ShearCell keywords): its size mix, kt/kn,
-    e_n and the same dt per contact time, read from the Channel scene's and the contact
-    law's defaults (their one home). The tangential damping ratio (1/2) is both scenes'."""
-    from granflow.scenes.cell import contact_time
-    from granflow.scenes.channel import Channel
-    from granflow.simulation import ContactLaw
-
-    dflt: dict[str, Any] = {
-        f.name: (f.default_factory() if f.default_factory is not dataclasses.MISSING
-                 else f.default) for f in dataclasses.fields(Channel)}
-    law = ContactLaw(kn=dflt["kn"], e_n=dflt["e_n"], mu=dflt["mu"], kt=dflt["kt"])
-    assert law.kn is not None and law.kt is not None and law.e_n is not None
-    sizes = {float(k): float(v) for k, v in dflt["sizes"].items()}
-    m_mean = dflt["density"] * np.pi / 6 * sum(f * k**3 for k, f in sizes.items())
-    # the cell's t_c: its mean-particle collision time with this e_n
-    tc = contact_time(law.kn, m_mean / 2, "collision", law.e_n)
-    return {"size_mix": sizes, "kt_ratio": law.kt / law.kn, "e_n": law.e_n,
-            "density": dflt["density"], "dt_frac": float(dflt["dt"] / tc)}
+def channel_material() -> Material:
+    """The channel's material (:data:`granflow.material.MATERIAL_000`: its size mix and the
+    kernel's law defaults) for the cell, in the cell's units (kn = 1), with the channel's dt
+    per contact time (dt = 1.2e-4 sqrt(d/g) at kn = 1e6 over the mean pair's collision time)
+    as its dt rule."""
+    dt = MATERIAL_000.dt()
+    assert dt is not None
+    frac = dt / MATERIAL_000.contact_time("mean", reading="collision")
+    return MATERIAL_000.with_(kn=1.0, tc_reading="collision",
+                              dt_rule=DtRule.tc_fraction(frac))
 
 
 # --------------------------------------------------------------------------------------------
@@ -197,9 +193,9 @@ class CellStudy(Study):
     def scene(self, point: Point, plan: Plan, threads: int) -> Any:
         from granflow.scenes.cell import ShearCell
 
-        return ShearCell(N=point.N, mu_s=point.mu_s, p_ext=point.p_ext,
-                         tau_ratio=point.tau_ratio, seed=point.seed,
-                         sample_every=plan.sample_every, threads=threads, **plan.cell_options)
+        return ShearCell(N=point.N, mu=point.mu_s, p_ext=point.p_ext,
+                         tau_ratio=point.tau_ratio, seed=point.seed, material=plan.material,
+                         sample_every=plan.sample_every, threads=threads)
 
     def next_steps(self, scene: Any, point: Point, plan: Plan) -> int:
         left = plan.max_steps(point.N) - _shear_steps(scene)
