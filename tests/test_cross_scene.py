@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
-from granflow.analysis import calibration as acal
-from granflow.analysis import channel_model as cm
 from granflow.analysis import rheology as rh
 from granflow.continuum import LocalLaw
+from granflow.continuum import calibration as acal
+from granflow.continuum import channel_model as cm
 from granflow.errors import ParameterError
 from granflow.material import MATERIAL_000
 from granflow.studies import cross_scene as cs

@@ -17,7 +17,7 @@ import os, time
 from granflow.study import map_tasks
 
 def slow(i, threads):
-    print("worker", os.getpid(), flush=True)
+    os.write(1, f"worker {os.getpid()}\\n".encode())  # one write: the workers share the pipe
     time.sleep(60)
 
 if __name__ == "__main__":
@@ -37,7 +37,7 @@ def simulate(i, threads):
     x, d = gf.random_packing(gf.sizes.uniform(0.9, 1.1), box, 0.3, seed=i)
     sim = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e5, e_n=0.8, mu=0.5), threads=1,
                         velocities=gf.maxwell_velocities(len(d), 1.0, seed=i))
-    print("worker", os.getpid(), flush=True)
+    os.write(1, f"worker {os.getpid()}\\n".encode())  # one write: the workers share the pipe
     while True:
         sim.run(200, progress=False)
 

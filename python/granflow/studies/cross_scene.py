@@ -7,7 +7,7 @@ the channel's material, laid over the channel's DEM profiles at several widths.
            [--channel DIR] [--reanalyse] [--only-report]
 
 This module is the command and the calibration campaign's plans; the
-analysis is :mod:`granflow.analysis.calibration` and :mod:`granflow.analysis.channel_model`,
+analysis is :mod:`granflow.continuum.calibration` and :mod:`granflow.continuum.channel_model`,
 the report :mod:`granflow.studies.cross_scene_report`. The chain: (1) the calibration campaign,
 cell runs (granflow.studies._campaign.cell: reproduce_002's points and stop rule) with the
 channel's particles and contact law (_campaign.cell.channel_material) at the channel's pressure

@@ -13,8 +13,9 @@ import numpy as np
 import polars as pl
 from matplotlib.figure import Figure
 
-from granflow.analysis.calibration import fits_table
-from granflow.analysis.channel_model import (
+from granflow.analysis.plots import ZONE_COLOURS, save_figure
+from granflow.continuum.calibration import fits_table
+from granflow.continuum.channel_model import (
     A_PHI_BAR,
     A_WIDTH,
     I_PLUG,
@@ -23,7 +24,6 @@ from granflow.analysis.channel_model import (
     channel_cases,
     predict,
 )
-from granflow.analysis.plots import ZONE_COLOURS, save_figure
 
 from ._campaign import md_table
 from ._campaign.cell import channel_material

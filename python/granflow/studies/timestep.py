@@ -387,7 +387,7 @@ def sheared_packing_study(
     def warm(scene: Any) -> None:
         # a whole number of samples, so that the timed run samples at the same times
         every = int(getattr(scene, "sample_every", 1))
-        n = round(warmup_tc * t_c / scene.core.dt)
+        n = round(warmup_tc * t_c / scene.timestep)
         scene.run(every * math.ceil(n / every), progress=False)
 
     return scene_study(factory, observables, fracs, time_tc * t_c, t_c=t_c, prepare=warm)

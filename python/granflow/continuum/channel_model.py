@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 import polars as pl
 
-from granflow.analysis.calibration import Calibration, calibrate
 from granflow.analysis.channel import delta_095_profile
 from granflow.analysis.tables import FloatArray
 from granflow.continuum import (
@@ -30,6 +29,7 @@ from granflow.continuum import (
     solve_local,
     solve_nonlocal,
 )
+from granflow.continuum.calibration import Calibration, calibrate
 from granflow.errors import GranflowError, ParameterError
 
 #: I below which a profile counts as plug (both the DEM's bins and the models'): the DEM's

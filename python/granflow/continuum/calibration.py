@@ -13,7 +13,7 @@ import polars as pl
 
 from granflow.analysis.rheology import FitResult
 from granflow.analysis.tables import FloatArray
-from granflow.continuum import LocalLaw
+from granflow.continuum.laws import LocalLaw
 from granflow.errors import ParameterError
 
 
