@@ -108,25 +108,26 @@ def _real(v: Any) -> bool:
 class Material:
     """Particles and their contact law (000 App. A, 002 §2.4–2.5).
 
-    sizes
-        The size distribution (:mod:`granflow.sizes`; a scene's ``sizes`` also takes a
-        ``{d: fraction}`` mapping or ``[lo, hi]``).
-    density
-        Particle density (1: masses in units of rho_p d^3).
-    kn, kt_ratio, e_n, xi_t_ratio, mu, form
-        The contact law: normal stiffness, k_t/k_n, restitution, tangential damping ratio,
-        friction coefficient, "hooke" or "hertz". None is the kernel's default (kn = 1e6,
-        k_t = 2/7 kn, e_n = 0.82, xi_t_ratio = 1/2, mu = 0.5).
-    gamma_n_tc
-        002's damping instead of a restitution: gamma_n = ``gamma_n_tc`` / t_c (rate form,
-        t_c of the mean pair by ``tc_reading``; 002: 0.5). Not together with ``e_n``.
-    tc_reading
-        How the mean pair's contact time reads 002's formula: "collision" or "printed".
-    skin
-        Neighbour-list skin (None: the kernel's default).
-    dt_rule
-        The time step when a scene is given none (:class:`DtRule`; None: the kernel's default,
-        t_c/50 of the lightest pair).
+    A law field left at None is the kernel's default (kn = 1e6, k_t = 2/7 kn, e_n = 0.82,
+    xi_t_ratio = 1/2, mu = 0.5).
+
+    Args:
+        sizes: The size distribution (:mod:`granflow.sizes`; a scene's ``sizes`` also takes a
+            ``{d: fraction}`` mapping or ``[lo, hi]``).
+        density: Particle density (1: masses in units of rho_p d^3).
+        kn: Normal stiffness.
+        kt_ratio: Tangential over normal stiffness, k_t/k_n.
+        e_n: Normal restitution (the damping derived per pair). Not with ``gamma_n_tc``.
+        gamma_n_tc: 002's damping instead of a restitution: gamma_n = ``gamma_n_tc`` / t_c
+            (rate form, t_c of the mean pair by ``tc_reading``; 002: 0.5).
+        xi_t_ratio: Tangential over normal damping.
+        mu: Coulomb friction coefficient.
+        form: The normal force, "hooke" (linear) or "hertz".
+        tc_reading: How the mean pair's contact time reads 002's formula: "collision" or
+            "printed" (:meth:`contact_time`).
+        skin: Neighbour-list skin (None: the kernel's default).
+        dt_rule: The time step when a scene is given none (:class:`DtRule`; None: the
+            kernel's default, t_c/50 of the lightest pair).
     """
 
     sizes: SizeDist

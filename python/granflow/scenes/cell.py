@@ -94,23 +94,22 @@ def fabric(normals: np.ndarray) -> np.ndarray:
 class ShearCell:
     """Stress-controlled cell scene (002 §2.2–2.5).
 
-    N
-        The solid volume in mean particles (N <pi d^3/6>), filled with whole particles: the
-        count ``n`` differs slightly (N = 2000 gives 1996 with 002's sizes).
-    p_ext, tau_ratio
-        The imposed pressure (units kn/a) and tau_ext/p_ext.
-    phi0, start, omega_g_factor
-        The dilute start's volume fraction; "compacted" or "dilute" (module docstring); the
-        cell mass's frequency factor.
-    material, sizes, density, kn, kt_ratio, e_n, xi_t_ratio, mu, form, tc_reading, skin
-        The material (default :data:`granflow.material.MATERIAL_002`) and flat overrides of
-        its fields (:mod:`granflow.scenes`).
-    dt
-        The time step (None: the material's rule, 002: 0.02 t_c).
-    sample_every, seed, threads
-        Observables every ``sample_every`` steps (None: none), the seed, kernel threads.
+    The material (``material`` and its flat overrides ``sizes``, ``density``, ``kn``,
+    ``kt_ratio``, ``e_n``, ``xi_t_ratio``, ``mu``, ``form``, ``tc_reading``, ``skin``) and
+    ``dt``, ``sample_every``, ``seed``, ``threads`` mean what they mean in every scene
+    (:mod:`granflow.scenes`); the cell's material is :data:`granflow.material.MATERIAL_002`
+    unless ``material`` says otherwise, and its ``dt`` None is that material's rule (002:
+    0.02 t_c). The kernel is built by :meth:`prepare` (or :meth:`restore`, :meth:`run`).
 
-    The kernel is built by :meth:`prepare` (or :meth:`restore`, :meth:`run`).
+    Args:
+        N: The solid volume in mean particles (N <pi d^3/6>), filled with whole particles: the
+            count ``n`` differs slightly (N = 2000 gives 1996 with 002's sizes).
+        p_ext: The imposed pressure (units kn/a).
+        tau_ratio: The imposed shear stress over the pressure, tau_ext/p_ext.
+        phi0: The volume fraction of the dilute random start.
+        start: "compacted" (compact under p_ext alone first) or "dilute" (002's protocol;
+            module docstring).
+        omega_g_factor: The cell mass's frequency factor (module docstring).
     """
 
     N: int = 2000

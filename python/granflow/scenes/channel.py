@@ -138,13 +138,29 @@ class _Pour:
 class Channel:
     """Vertical channel scene. The material is 000's (:data:`granflow.material.MATERIAL_000`,
     §2, App. A) unless ``material`` says otherwise; the flat overrides (``sizes``, ``kn``,
-    ``kt_ratio``, ``e_n``, ``mu``, ...) change one field of it (:mod:`granflow.scenes`). The
-    geometry defaults are a reduced channel for quick runs, not the paper's: 000 runs
-    W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set them for its scale.
+    ``kt_ratio``, ``e_n``, ``mu``, ...), ``dt``, ``sample_every``, ``seed`` and ``threads``
+    mean what they mean in every scene (:mod:`granflow.scenes`); ``dt`` None is the material's
+    rule (000: 1.2e-4 sqrt(1e6/kn) sqrt(d/g)). The geometry defaults are a reduced channel for
+    quick runs, not the paper's: 000 runs W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set
+    them for its scale. The kernel is built by :meth:`prepare`.
 
-    ``dt`` None is the material's rule (000: 1.2e-4 sqrt(1e6/kn) sqrt(d/g)). The wall law is
-    the particles' unless ``wall_kn``, ``wall_e_n``, ``wall_mu`` are set (its k_t is the
-    kernel's default, 2/7 of the wall's kn). The kernel is built by :meth:`prepare`."""
+    Args:
+        W: The channel's width (walls at x = 0 and x = W), in d.
+        H: The periodic height (along gravity, -y), in d.
+        B: The periodic depth (z), in d.
+        phi_bar: The mean volume fraction (whole particles: the achieved value is in
+            ``prep_info["phi_bar_achieved"]``).
+        wall_kn: The walls' normal stiffness (None: the particles' kn).
+        wall_e_n: The walls' restitution (None: the particles' e_n).
+        wall_mu: The walls' friction coefficient (None: the particles' mu). The walls' k_t is
+            the kernel's default, 2/7 of their kn.
+        bin_width: The interior bins' width across x, in d (adjusted to tile exactly).
+        wall_bin: The width of the bin at each wall, in d.
+        window: Samples averaged into one row of the ``bins`` table.
+        settle_ke: The pour is settled when the kinetic energy per particle is below this, in
+            m g d.
+        prep_kn: The soft pour's stiffness (the pour uses min(kn, prep_kn)).
+    """
 
     W: float = 20.0
     H: float = 30.0

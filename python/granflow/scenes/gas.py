@@ -47,11 +47,17 @@ GAS_MATERIAL = MATERIAL_000.with_(sizes=uniform(0.9, 1.1), kn=1e5, e_n=0.8, dt_r
 class PeriodicGas:
     """A periodic box of polydisperse spheres with random velocities (no walls, no gravity).
 
-    ``L`` the box side, ``phi`` the volume fraction, ``temperature`` the velocity variance per
-    component; ``material`` (default :data:`GAS_MATERIAL`) and the flat overrides as every
-    scene (:mod:`granflow.scenes`); ``dt`` None is the material's rule. Samples (every
-    ``sample_every`` steps) a ``series`` table: step, t, ke_trans, ke_rot, elastic,
-    n_contacts, max_overlap. The kernel is built by :meth:`prepare`."""
+    The material (default :data:`GAS_MATERIAL`) and its flat overrides, ``dt`` (None: the
+    material's rule), ``sample_every``, ``seed`` and ``threads`` mean what they mean in every
+    scene (:mod:`granflow.scenes`). Samples (every ``sample_every`` steps) a ``series``
+    table: step, t, ke_trans, ke_rot, elastic, n_contacts, max_overlap. The kernel is built by
+    :meth:`prepare`.
+
+    Args:
+        L: The side of the cubic periodic box.
+        phi: The volume fraction of the random insertion.
+        temperature: The velocity variance per component of the Maxwell start.
+    """
 
     L: float = 10.0
     phi: float = 0.3

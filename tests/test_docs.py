@@ -1,0 +1,64 @@
+"""The API reference is generated from the docstrings (mkdocs.yml; built with --strict by
+scripts/test.sh, where griffe refuses an ``Args:`` entry naming no parameter). These tests keep
+the other direction: every parameter of a scene and of a Material is documented, the shared
+vocabulary once in :mod:`granflow.scenes`, the rest in the class's ``Args:`` section."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import granflow.scenes as scenes
+import pytest
+from granflow.material import Material
+from granflow.scenes import SCENES
+from granflow.scenes._base import MATERIAL_KEYS
+
+#: the parameters every scene shares, documented once in granflow.scenes
+SHARED = {"material", *MATERIAL_KEYS, "dt", "sample_every", "seed", "threads"}
+
+
+def documented_args(doc: str) -> set[str]:
+    """The names of a Google-style ``Args:`` section of ``doc``."""
+    m = re.search(r"^( *)Args:\n((?:\1 {4}.*\n|\s*\n)*)", doc + "\n", re.M)
+    if m is None:
+        return set()
+    indent = len(m.group(1)) + 4
+    return {line[indent:].split(":", 1)[0] for line in m.group(2).splitlines()
+            if len(line) > indent and line[indent] != " " and ":" in line}
+
+
+def test_documented_args_reads_a_google_section():
+    doc = """Summary.
+
+    Args:
+        a: one.
+        b: two,
+            continued: not a name.
+
+    Returns:
+        nothing.
+    """
+    assert documented_args(doc) == {"a", "b"}
+    assert documented_args("No section.") == set()
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_every_scene_parameter_is_documented(name):
+    cls = SCENES[name]
+    fields = {f.name for f in dataclasses.fields(cls)}
+    own = fields - SHARED
+    missing = own - documented_args(cls.__doc__ or "")
+    assert not missing, f"{cls.__name__}: parameters without an Args entry: {sorted(missing)}"
+    assert SHARED <= fields, f"{cls.__name__} lacks shared names {sorted(SHARED - fields)}"
+
+
+def test_the_shared_vocabulary_is_documented_once_in_scenes():
+    doc = scenes.__doc__ or ""
+    missing = [k for k in sorted(SHARED) if f"``{k}``" not in doc]
+    assert not missing, f"granflow.scenes does not document {missing}"
+
+
+def test_every_material_field_is_documented():
+    fields = {f.name for f in dataclasses.fields(Material)}
+    assert fields == documented_args(Material.__doc__ or "")
