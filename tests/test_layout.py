@@ -1,7 +1,7 @@
 """The package's layout: imports run one way (the module import graph of python/granflow is
 acyclic, and the layers import only downwards: scenes never import studies; analysis never imports
-scenes, studies or the continuum models; granflow.states imports nothing of granflow), every
-module imports on its own, and module docstrings carry no issue numbers."""
+scenes, studies or the continuum models; granflow.states imports nothing of granflow; studies
+share code only through their engine, studies._campaign), every module imports on its own, and module docstrings carry no issue numbers."""
 
 from __future__ import annotations
 
@@ -191,3 +191,35 @@ def test_scenes_have_one_home():
                 "granflow.plotting", "granflow.analysis.errors"):
         with pytest.raises(ModuleNotFoundError):
             importlib.import_module(old)
+
+
+def study_violations(graph: dict[str, set[str]]) -> list[str]:
+    """Imports from one study module of granflow.studies to another: a study reaches others'
+    code only through the shared engine, granflow.studies._campaign; a study's report module
+    (``X_report``) may import its study ``X``, and its study may import it."""
+    def study(mod: str) -> str | None:
+        parts = mod.split(".")
+        if len(parts) < 3 or parts[:2] != ["granflow", "studies"] or parts[2] == "_campaign":
+            return None
+        return parts[2].removesuffix("_report")
+
+    out = []
+    for mod, targets in sorted(graph.items()):
+        own = study(mod)
+        if own is None:
+            continue
+        out += [f"{mod} -> {t}" for t in sorted(targets)
+                if study(t) is not None and study(t) != own]
+    return out
+
+
+def test_studies_share_code_only_through_the_engine():
+    assert study_violations(import_graph()) == []
+    assert study_violations({
+        "granflow.studies.cross_scene": {"granflow.studies.reproduce_002",
+                                         "granflow.studies._campaign.cell",
+                                         "granflow.studies.cross_scene_report"},
+        "granflow.studies.cross_scene_report": {"granflow.studies.cross_scene"},
+        "granflow.studies.stability": {"granflow.studies.timestep"},
+    }) == ["granflow.studies.cross_scene -> granflow.studies.reproduce_002",
+           "granflow.studies.stability -> granflow.studies.timestep"]

@@ -12,7 +12,7 @@ import numpy as np
 
 from granflow.errors import ParameterError
 from granflow.simulation import Box, ContactLaw, Simulation, random_packing
-from granflow.sizes import SizeDist
+from granflow.sizes import SizeDist, solid_volume
 
 
 def dense_periodic_packing(
@@ -33,14 +33,14 @@ def dense_periodic_packing(
     if n < 10:
         raise ParameterError(f"invalid n = {n}: allowed n >= 10")
     d_probe = sizes.diameters_for_volume(1000.0, seed)
-    vmean = float(np.mean(np.pi * d_probe**3 / 6))
+    vmean = solid_volume(d_probe) / len(d_probe)
     phi0 = min(0.3, phi)
     vol = n * vmean / phi0
     a = np.asarray(aspect, float)
     side = (vol / np.prod(a)) ** (1 / 3)
     box = Box(length=tuple(side * a))
     x, d = random_packing(sizes, box, phi0, seed=seed)
-    vs = float(np.sum(np.pi * d**3 / 6))
+    vs = solid_volume(d)
     law = ContactLaw(kn=kn, e_n=0.1, mu=0.0)
     cur = vs / box.volume
     while True:

@@ -84,6 +84,12 @@ class SizeDist:
         return {str(d): f for d, f in zip(self.params[0::2], self.params[1::2], strict=True)}
 
 
+def solid_volume(diameters: Any) -> float:
+    """The total volume of spheres of these ``diameters``, sum pi d^3 / 6."""
+    d = np.asarray(diameters, dtype=float)
+    return float(np.sum(np.pi * d**3 / 6))
+
+
 def mono(d: float = 1.0) -> SizeDist:
     """All particles of diameter ``d``."""
     return SizeDist("mono", (float(d),))

@@ -50,6 +50,7 @@ from granflow import _core
 from granflow.errors import ConfigurationError, DilationError, InstabilityError, ParameterError
 from granflow.material import MATERIAL_002, Material
 from granflow.simulation import run_chunked
+from granflow.sizes import solid_volume
 from granflow.states import FlowState
 
 from ._base import (
@@ -160,7 +161,7 @@ class ShearCell:
                                                material_overrides(self))
         d = mat.sizes.diameters_for_volume(self.N * mat.sizes.mean_volume, self.seed)
         self._d = d
-        self._vs = vs = float(np.sum(np.pi * d**3 / 6))
+        self._vs = vs = solid_volume(d)
         self._length = float((vs / self.phi0) ** (1 / 3))
         self.a = float(np.mean(d))
         m_mean = mat.mean_mass(d)

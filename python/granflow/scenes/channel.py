@@ -54,7 +54,7 @@ from granflow import _core
 from granflow.errors import ConfigurationError, ParameterError
 from granflow.material import MATERIAL_000, Material, kernel_default_skin
 from granflow.simulation import Box, ContactLaw, Simulation, Wall, run_chunked
-from granflow.sizes import SizeDist
+from granflow.sizes import SizeDist, solid_volume
 from granflow.states import FlowState
 
 from ._base import (
@@ -355,7 +355,7 @@ class Channel:
         under gravity (soft, frictionless) until the bed settles."""
         vol_target = self.phi_bar * self.W * self.H * self.B
         d = self.size_dist().diameters_for_volume(vol_target, self.seed)
-        vs = float(np.sum(np.pi * d**3 / 6))
+        vs = solid_volume(d)
         h_fill = vs / (self.W * self.B * PHI_INSERT) + HEADROOM_DMAX * d.max()
         x = np.asarray(_core.insert_spheres(
             d, (0.0, 0.0, 0.0), (self.W, h_fill, self.B), (False, False, True), self.seed))

@@ -400,8 +400,7 @@ def _particle_steps(plan: Any) -> Callable[[Any], float]:
     count from W H B phi_bar / <pi d^3/6> of 000's mix, times its steps."""
     from granflow.sizes import CHANNEL_MIX
 
-    d, f = np.array(CHANNEL_MIX.params[0::2]), np.array(CHANNEL_MIX.params[1::2])
-    v = float(np.sum(f * np.pi * d**3 / 6))
+    v = CHANNEL_MIX.mean_volume
     return lambda p: p.W * p.H * p.B * p.phi_bar / v * plan.t_max / p.dt
 
 

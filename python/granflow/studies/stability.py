@@ -50,7 +50,6 @@ expected granflow exception.
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import signal
 import threading
@@ -67,7 +66,7 @@ import pyarrow as pa
 
 from granflow.analysis.collision import collision_law, head_on_collision
 from granflow.errors import ConfigurationError, InstabilityError, ParameterError
-from granflow.material import law_contact_time
+from granflow.material import MATERIAL_000, law_contact_time
 from granflow.simulation import (
     Box,
     ContactLaw,
@@ -75,7 +74,7 @@ from granflow.simulation import (
     maxwell_velocities,
     random_packing,
 )
-from granflow.sizes import mono, uniform
+from granflow.sizes import mono, solid_volume, uniform
 
 if TYPE_CHECKING:
     from granflow.scenes import Scene
@@ -404,7 +403,7 @@ def _cell(p: float, tau_over_p: float, time_tc: float = 2000.0,
     core = cell.core
     t_c = float(cell.t_c)
     steps = max(1, round(time_tc * t_c / core.dt))
-    vs = float(np.sum(np.pi * np.asarray(core.diameters()) ** 3 / 6))
+    vs = solid_volume(core.diameters())
 
     def dilating() -> str | None:
         vol = core.volume() if callable(core.volume) else core.volume
@@ -430,11 +429,12 @@ def _cell(p: float, tau_over_p: float, time_tc: float = 2000.0,
 
 def _register_scene_cases() -> None:
     for kn in (1e5, 1e6, 1e7, 1e8):
-        # the channel's default dt = 1.2e-4 (~t_c/11 at kn = 1e6), scaled as t_c ~ kn^-1/2
-        dt = 1.2e-4 * math.sqrt(1e6 / kn)
+        # the channel's dt: its material's rule (~t_c/11 at every kn)
+        dt = MATERIAL_000.with_(kn=kn).dt()
+        assert dt is not None
         register(Case(
             f"channel_kn_{kn:.0e}", "kn", "long",
-            partial(_channel, {"kn": kn, "dt": dt, "phi_bar": 0.58}, 20.0),
+            partial(_channel, {"kn": kn, "phi_bar": 0.58}, 20.0),
             energy_tol=2e-2, scene="channel",
             description=f"channel W=10, H=10, B=4, phi_bar = 0.58 (flows at kn = 1e6), "
                         f"kn = {kn:g}, dt = {dt:.2e}, t = 20 sqrt(d/g)",

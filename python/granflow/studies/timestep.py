@@ -93,13 +93,6 @@ def _core(obj: Any) -> Any:
 # --------------------------------------------------------------------------------------------
 # binary collision
 # --------------------------------------------------------------------------------------------
-def contact_time(law: ContactLaw, d: tuple[float, float] = (1.0, 1.0),
-                 density: float = 1.0) -> float:
-    """``t_c`` the kernel uses for a pair of diameters ``d`` under ``law`` (raises
-    :class:`granflow.ParameterError` for an over-damped rate ``xi_n``)."""
-    return law_contact_time(law, np.asarray(d, float), density)
-
-
 def binary_collision_study(
     fracs: Sequence[float] = DEFAULT_FRACS,
     e_n: float = 0.82,
@@ -131,7 +124,7 @@ def binary_collision_study(
     if phases < 1 or repeats < 1:
         raise ParameterError(f"invalid phases/repeats = {phases}/{repeats}: allowed >= 1")
     law = collision_law(e_n, kn, form)
-    t_c = contact_time(law, d)
+    t_c = law_contact_time(law, np.asarray(d, float))
     head_on_collision(law, t_c / fr[0], v0=v0, d=d, t_c=t_c)  # warm-up, not timed
     rows: list[dict[str, Any]] = []
     for f in fr:
