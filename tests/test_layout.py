@@ -1,7 +1,8 @@
 """The package's layout: imports run one way (the module import graph of python/granflow is
 acyclic, and the layers import only downwards: scenes never import studies; analysis never imports
 scenes, studies or the continuum models; granflow.states imports nothing of granflow; studies
-share code only through their engine, studies._campaign), every module imports on its own, and module docstrings carry no issue numbers."""
+share code only through their engine, studies._campaign), every module imports on its own, and
+module docstrings carry no issue numbers."""
 
 from __future__ import annotations
 
