@@ -10,20 +10,11 @@
 Every scene keeps the :class:`Scene` protocol, so the runner, the CLI and the studies treat them
 alike; :data:`SCENES` maps the TOML ``scene = ...`` names to the classes.
 
-One vocabulary
---------------
-What the scenes share has the same name and meaning in each:
-
-* ``material``: a :class:`granflow.material.Material` (or the name of one, "000" or "002", in a
-  TOML spec); None is the scene's own (the channel :data:`~granflow.material.MATERIAL_000`,
-  the cell :data:`~granflow.material.MATERIAL_002`, the gas :data:`gas.GAS_MATERIAL`).
-* flat overrides of one field of that material, None leaving it: ``sizes`` (a ``{d:
-  fraction}`` mapping, ``[lo, hi]`` or a :class:`~granflow.sizes.SizeDist`), ``density``,
-  ``kn``, ``kt_ratio`` (k_t/k_n), ``e_n``, ``xi_t_ratio``, ``mu`` (the friction coefficient),
-  ``form``, ``tc_reading``, ``skin``. Scenes take both, so a TOML spec or a sweep grid can vary
-  one field (``mu = [0.1, 0.3]``) and code can pass a whole material.
-* ``dt``: the time step, absolute; None is the material's rule (:meth:`Material.dt`).
-* ``sample_every`` (steps between samples), ``seed``, ``threads``.
+One vocabulary: what the scenes share has the same name and meaning in each, and one home,
+:class:`SceneParameters` (every scene's base: ``material`` and its flat overrides ``sizes``,
+``density``, ``kn``, ``kt_ratio``, ``e_n``, ``xi_t_ratio``, ``mu``, ``form``, ``tc_reading``,
+``skin``; ``dt``, ``seed``, ``threads``, keywords only); ``sample_every`` is every scene's
+sampling interval in steps.
 
 Construction checks the parameters; :meth:`Scene.prepare` builds the kernel (every scene);
 ``core`` is the kernel simulation, ``prepared`` whether it exists. ``summary()`` says ``n``
@@ -37,6 +28,7 @@ from ._base import (
     MATERIAL_KEYS,
     SCENES,
     Scene,
+    SceneParameters,
     check_keys,
     read_checkpoint_state,
     register,
@@ -64,6 +56,7 @@ __all__ = [
     "EnergyBalance",
     "PeriodicGas",
     "Scene",
+    "SceneParameters",
     "ShearCell",
     "cell_energy_balance",
     "check_keys",

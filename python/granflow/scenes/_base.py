@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -54,6 +54,52 @@ def check_keys(section: str, given: Mapping[str, Any], allowed: Mapping[str, Any
 #: scene; None leaves the material's value).
 MATERIAL_KEYS = ("sizes", "density", "kn", "kt_ratio", "e_n", "xi_t_ratio", "mu", "form",
                  "tc_reading", "skin")
+
+
+@dataclass(kw_only=True)
+class SceneParameters:
+    """The parameters every scene shares, with one name and meaning in each (keywords only).
+
+    Args:
+        material: A :class:`granflow.material.Material`, or the name of one ("000", "002"; a
+            TOML spec's ``material = "..."``); None is the scene's own (the channel
+            :data:`~granflow.material.MATERIAL_000`, the cell
+            :data:`~granflow.material.MATERIAL_002`, the gas :data:`gas.GAS_MATERIAL`).
+        sizes: Override of the material's size distribution: a ``{d: fraction}`` mapping,
+            ``[lo, hi]`` (uniform) or a :class:`~granflow.sizes.SizeDist`.
+        density: Override of the particle density.
+        kn: Override of the normal stiffness.
+        kt_ratio: Override of the tangential over normal stiffness, k_t/k_n.
+        e_n: Override of the normal restitution.
+        xi_t_ratio: Override of the tangential over normal damping.
+        mu: Override of the friction coefficient.
+        form: Override of the normal force law, "hooke" or "hertz".
+        tc_reading: Override of how the mean pair's contact time reads 002 ("collision" or
+            "printed").
+        skin: Override of the neighbour-list skin.
+        dt: The time step, absolute; None is the material's rule (:meth:`Material.dt`).
+        seed: The seed of every random draw of the scene (sizes, positions, velocities).
+        threads: Kernel threads (None: all cores); results do not depend on it.
+
+    An override left at None keeps the material's value; scenes take both a material and the
+    overrides so that a TOML spec or a sweep grid can vary one field (``mu = [0.1, 0.3]``) and
+    code can pass a whole material.
+    """
+
+    material: Material | str | None = None
+    sizes: Any = None
+    density: float | None = None
+    kn: float | None = None
+    kt_ratio: float | None = None
+    e_n: float | None = None
+    xi_t_ratio: float | None = None
+    mu: float | None = None
+    form: str | None = None
+    tc_reading: str | None = None
+    skin: float | None = None
+    dt: float | None = None
+    seed: int = 0
+    threads: int | None = None
 
 
 def material_overrides(scene: Any) -> dict[str, Any]:

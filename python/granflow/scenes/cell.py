@@ -55,6 +55,7 @@ from granflow.states import FlowState
 
 from ._base import (
     SampleTables,
+    SceneParameters,
     check_run_keys,
     material_overrides,
     read_checkpoint_state,
@@ -92,15 +93,14 @@ def fabric(normals: np.ndarray) -> np.ndarray:
 
 @register("cell")
 @dataclass
-class ShearCell:
+class ShearCell(SceneParameters):
     """Stress-controlled cell scene (002 §2.2–2.5).
 
-    The material (``material`` and its flat overrides ``sizes``, ``density``, ``kn``,
-    ``kt_ratio``, ``e_n``, ``xi_t_ratio``, ``mu``, ``form``, ``tc_reading``, ``skin``) and
-    ``dt``, ``sample_every``, ``seed``, ``threads`` mean what they mean in every scene
-    (:mod:`granflow.scenes`); the cell's material is :data:`granflow.material.MATERIAL_002`
-    unless ``material`` says otherwise, and its ``dt`` None is that material's rule (002:
-    0.02 t_c). The kernel is built by :meth:`prepare` (or :meth:`restore`, :meth:`run`).
+    The material, its flat overrides, ``dt``, ``seed`` and ``threads`` are every scene's
+    (:class:`~granflow.scenes.SceneParameters`); the cell's material is
+    :data:`granflow.material.MATERIAL_002` unless ``material`` says otherwise, and its ``dt``
+    None is that material's rule (002: 0.02 t_c). The kernel is built by :meth:`prepare` (or
+    :meth:`restore`, :meth:`run`).
 
     Args:
         N: The solid volume in mean particles (N <pi d^3/6>), filled with whole particles: the
@@ -111,6 +111,8 @@ class ShearCell:
         start: "compacted" (compact under p_ext alone first) or "dilute" (002's protocol;
             module docstring).
         omega_g_factor: The cell mass's frequency factor (module docstring).
+        sample_every: Steps between two rows of the ``series`` table of observables (None:
+            no observables).
     """
 
     N: int = 2000
@@ -119,21 +121,7 @@ class ShearCell:
     phi0: float = 0.05
     start: str = "compacted"
     omega_g_factor: float = 2.2
-    material: Material | str | None = None
-    sizes: Any = None
-    density: float | None = None
-    kn: float | None = None
-    kt_ratio: float | None = None
-    e_n: float | None = None
-    xi_t_ratio: float | None = None
-    mu: float | None = None
-    form: str | None = None
-    tc_reading: str | None = None
-    skin: float | None = None
-    dt: float | None = None
     sample_every: int | None = 200
-    seed: int = 0
-    threads: int | None = None
 
     scene_name: ClassVar[str]
     #: the runner writes the statistical-error report of a finished run

@@ -59,6 +59,7 @@ from granflow.states import FlowState
 
 from ._base import (
     SampleTables,
+    SceneParameters,
     check_run_keys,
     material_overrides,
     read_checkpoint_state,
@@ -135,14 +136,14 @@ class _Pour:
 
 @register("channel")
 @dataclass
-class Channel:
+class Channel(SceneParameters):
     """Vertical channel scene. The material is 000's (:data:`granflow.material.MATERIAL_000`,
     §2, App. A) unless ``material`` says otherwise; the flat overrides (``sizes``, ``kn``,
-    ``kt_ratio``, ``e_n``, ``mu``, ...), ``dt``, ``sample_every``, ``seed`` and ``threads``
-    mean what they mean in every scene (:mod:`granflow.scenes`); ``dt`` None is the material's
-    rule (000: 1.2e-4 sqrt(1e6/kn) sqrt(d/g)). The geometry defaults are a reduced channel for
-    quick runs, not the paper's: 000 runs W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set
-    them for its scale. The kernel is built by :meth:`prepare`.
+    ``kt_ratio``, ``e_n``, ``mu``, ...), ``dt``, ``seed`` and ``threads`` are every scene's
+    (:class:`~granflow.scenes.SceneParameters`); ``dt`` None is the material's rule (000: 1.2e-4
+    sqrt(1e6/kn) sqrt(d/g)). The geometry defaults are a reduced channel for quick runs, not the
+    paper's: 000 runs W = 60-150 d, B = 40 d, H = 60 d + Delta H (§2), set them for its scale.
+    The kernel is built by :meth:`prepare`.
 
     Args:
         W: The channel's width (walls at x = 0 and x = W), in d.
@@ -156,6 +157,8 @@ class Channel:
             the kernel's default, 2/7 of their kn.
         bin_width: The interior bins' width across x, in d (adjusted to tile exactly).
         wall_bin: The width of the bin at each wall, in d.
+        sample_every: Steps between two samples of the ``bins`` and ``series`` tables (None: no
+            statistics).
         window: Samples averaged into one row of the ``bins`` table.
         settle_ke: The pour is settled when the kinetic energy per particle is below this, in
             m g d.
@@ -166,18 +169,6 @@ class Channel:
     H: float = 30.0
     B: float = 40.0
     phi_bar: float = 0.60
-    material: Material | str | None = None
-    sizes: Any = None
-    density: float | None = None
-    kn: float | None = None
-    kt_ratio: float | None = None
-    e_n: float | None = None
-    xi_t_ratio: float | None = None
-    mu: float | None = None
-    form: str | None = None
-    tc_reading: str | None = None
-    skin: float | None = None
-    dt: float | None = None
     wall_kn: float | None = None
     wall_e_n: float | None = None
     wall_mu: float | None = None
@@ -187,8 +178,6 @@ class Channel:
     window: int = 50
     settle_ke: float = 1e-4
     prep_kn: float = 1e4
-    seed: int = 0
-    threads: int | None = None
 
     scene_name: ClassVar[str]
     #: the runner writes the statistical-error report of a finished run

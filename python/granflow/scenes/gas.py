@@ -28,6 +28,7 @@ from granflow.sizes import uniform
 
 from ._base import (
     SampleTables,
+    SceneParameters,
     check_run_keys,
     material_overrides,
     read_checkpoint_state,
@@ -44,12 +45,12 @@ GAS_MATERIAL = MATERIAL_000.with_(sizes=uniform(0.9, 1.1), kn=1e5, e_n=0.8, dt_r
 
 @register("gas")
 @dataclass
-class PeriodicGas:
+class PeriodicGas(SceneParameters):
     """A periodic box of polydisperse spheres with random velocities (no walls, no gravity).
 
     The material (default :data:`GAS_MATERIAL`) and its flat overrides, ``dt`` (None: the
-    material's rule), ``sample_every``, ``seed`` and ``threads`` mean what they mean in every
-    scene (:mod:`granflow.scenes`). Samples (every ``sample_every`` steps) a ``series``
+    material's rule), ``seed`` and ``threads`` are every scene's
+    (:class:`~granflow.scenes.SceneParameters`). Samples (every ``sample_every`` steps) a ``series``
     table: step, t, ke_trans, ke_rot, elastic, n_contacts, max_overlap. The kernel is built by
     :meth:`prepare`.
 
@@ -57,26 +58,13 @@ class PeriodicGas:
         L: The side of the cubic periodic box.
         phi: The volume fraction of the random insertion.
         temperature: The velocity variance per component of the Maxwell start.
+        sample_every: Steps between two rows of the ``series`` table.
     """
 
     L: float = 10.0
     phi: float = 0.3
     temperature: float = 1.0
-    material: Material | str | None = None
-    sizes: Any = None
-    density: float | None = None
-    kn: float | None = None
-    kt_ratio: float | None = None
-    e_n: float | None = None
-    xi_t_ratio: float | None = None
-    mu: float | None = None
-    form: str | None = None
-    tc_reading: str | None = None
-    skin: float | None = None
-    dt: float | None = None
     sample_every: int = 100
-    seed: int = 0
-    threads: int | None = None
 
     scene_name: ClassVar[str]
     #: no statistical-error report (the gas has no steady figures)
