@@ -7,7 +7,7 @@ use crate::errors::{param_err, IntoPy};
 use granflow::contact::{LawInput, LawSpec};
 use granflow::particles::Particles;
 use granflow::V3;
-use numpy::{PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
