@@ -234,7 +234,10 @@ fn layer_breaks(edges: &Edges, layers: &[(&str, &str)]) -> Vec<String> {
 fn one_way(dir: &str) -> Edges {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
     let files = scan(&src);
-    assert!(files.contains_key(&Vec::<String>::new()), "no lib.rs under {dir}");
+    assert!(
+        files.contains_key(&Vec::<String>::new()),
+        "no lib.rs under {dir}"
+    );
     let edges = edges_of(&files);
     if let Some(c) = find_cycle(files.keys().cloned(), &edges) {
         panic!("import cycle in {dir}/: {}", c.join(" -> "));
