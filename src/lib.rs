@@ -24,6 +24,7 @@ pub mod rng;
 pub mod sampling;
 pub mod scene;
 pub mod sim;
+mod simd;
 pub mod table;
 
 pub use error::{Error, Result};

@@ -1,4 +1,5 @@
-//! The kernel's files depend on each other one way: every path a file names (`crate::a::b`,
+//! The kernel's files (`src/`) and the bindings' files (`bindings/src/`) depend on each other
+//! one way, each crate on its own: every path a file names (`crate::a::b`,
 //! `super::c`, `child::d`, in a `use` or inline) is an edge to the file of that module, and the
 //! graph of those edges has no cycle. A child module naming its parent's items (the AVX2
 //! twins in `engine/chunk/avx.rs` and `engine/integrate/wide.rs` use their parent's types) is
@@ -6,6 +7,9 @@
 //! depend one way. (One type's `impl` blocks spread over several files, as the
 //! engine's, call each other's methods without naming paths; those calls are not edges, and
 //! neither is a module's `pub use child::Item`, its public face.)
+//!
+//! Besides having no cycle, the kernel keeps a layer order ([`LAYERS`]): the samplers are
+//! handed views by the engine and never reach into it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -21,7 +25,8 @@ fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// Module path of a file under src/ ("" for lib.rs, "engine" for engine/mod.rs).
+/// Module path of a file under a crate's source root ("" for lib.rs, "engine" for
+/// engine/mod.rs).
 fn module_of(src: &Path, f: &Path) -> Vec<String> {
     let rel = f.strip_prefix(src).unwrap().with_extension("");
     let mut m: Vec<String> = rel.iter().map(|s| s.to_string_lossy().into()).collect();
@@ -32,7 +37,7 @@ fn module_of(src: &Path, f: &Path) -> Vec<String> {
 }
 
 /// The deepest module of `path` that is a file of the crate.
-fn resolve(path: &[String], files: &BTreeMap<Vec<String>, PathBuf>) -> Option<Vec<String>> {
+fn resolve<V>(path: &[String], files: &BTreeMap<Vec<String>, V>) -> Option<Vec<String>> {
     (0..=path.len())
         .rev()
         .map(|k| path[..k].to_vec())
@@ -115,18 +120,31 @@ fn named_paths(text: &str) -> Vec<(Root, Vec<String>)> {
     out
 }
 
-#[test]
-fn kernel_files_depend_one_way() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+/// Module path -> file text, for every `.rs` file under `src`.
+type Files = BTreeMap<Vec<String>, String>;
+/// Module -> the modules (files) it names.
+type Edges = BTreeMap<Vec<String>, BTreeSet<Vec<String>>>;
+
+fn scan(src: &Path) -> Files {
     let mut list = vec![];
-    rs_files(&src, &mut list);
-    let files: BTreeMap<Vec<String>, PathBuf> = list
-        .iter()
-        .map(|f| (module_of(&src, f), f.clone()))
-        .collect();
-    let mut edges: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = BTreeMap::new();
-    for (m, f) in &files {
-        let mut text = std::fs::read_to_string(f).unwrap();
+    rs_files(src, &mut list);
+    list.iter()
+        .map(|f| (module_of(src, f), std::fs::read_to_string(f).unwrap()))
+        .collect()
+}
+
+fn modules(s: &str) -> Vec<String> {
+    if s.is_empty() {
+        return vec![];
+    }
+    s.split("::").map(String::from).collect()
+}
+
+/// The edges between the files of one crate.
+fn edges_of(files: &Files) -> Edges {
+    let mut edges = Edges::new();
+    for (m, text) in files {
+        let mut text = text.clone();
         // an inline `mod tests` (whose `super` is the file itself) is not the file's code
         if let Some(i) = text.find("#[cfg(test)]\nmod tests") {
             text.truncate(i);
@@ -145,7 +163,7 @@ fn kernel_files_depend_one_way() {
                     t
                 }
             };
-            if let Some(t) = resolve(&target, &files) {
+            if let Some(t) = resolve(&target, files) {
                 // a child module using its parent's items is part of the parent's
                 // implementation (inside its privacy boundary): not an edge
                 if &t != m && !m.starts_with(&t) {
@@ -154,10 +172,14 @@ fn kernel_files_depend_one_way() {
             }
         }
     }
-    // depth-first search for a cycle, reporting it
+    edges
+}
+
+/// A cycle of the graph, if it has one (depth-first search).
+fn find_cycle(nodes: impl Iterator<Item = Vec<String>>, edges: &Edges) -> Option<Vec<String>> {
     fn visit(
         n: &Vec<String>,
-        edges: &BTreeMap<Vec<String>, BTreeSet<Vec<String>>>,
+        edges: &Edges,
         state: &mut BTreeMap<Vec<String>, u8>,
         stack: &mut Vec<Vec<String>>,
     ) -> Option<Vec<Vec<String>>> {
@@ -181,19 +203,145 @@ fn kernel_files_depend_one_way() {
         None
     }
     let mut state = BTreeMap::new();
-    for n in files.keys() {
-        if let Some(c) = visit(n, &edges, &mut state, &mut vec![]) {
-            let names: Vec<String> = c.iter().map(|m| m.join("::")).collect();
-            panic!("import cycle in src/: {}", names.join(" -> "));
+    for n in nodes {
+        if let Some(c) = visit(&n, edges, &mut state, &mut vec![]) {
+            return Some(c.iter().map(|m| m.join("::")).collect());
         }
     }
+    None
+}
+
+/// Kernel layers: (lower, upper) means no module under `lower` names one under `upper`.
+const LAYERS: &[(&str, &str)] = &[("sampling", "engine")];
+
+/// The edges that break a layer of `layers`, as "from -> to".
+fn layer_breaks(edges: &Edges, layers: &[(&str, &str)]) -> Vec<String> {
+    let mut out = vec![];
+    for (lower, upper) in layers {
+        let (lower, upper) = (modules(lower), modules(upper));
+        for (m, ts) in edges {
+            for t in ts {
+                if m.starts_with(&lower) && t.starts_with(&upper) {
+                    out.push(format!("{} -> {}", m.join("::"), t.join("::")));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The crate under `dir` (relative to the kernel's root) has no cycle; returns its edges.
+fn one_way(dir: &str) -> Edges {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join(dir);
+    let files = scan(&src);
+    assert!(
+        files.contains_key(&Vec::<String>::new()),
+        "no lib.rs under {dir}"
+    );
+    let edges = edges_of(&files);
+    if let Some(c) = find_cycle(files.keys().cloned(), &edges) {
+        panic!("import cycle in {dir}/: {}", c.join(" -> "));
+    }
+    edges
+}
+
+/// Whether `edges` has the edge a -> b.
+fn has(edges: &Edges, a: &str, b: &str) -> bool {
+    edges
+        .get(&modules(a))
+        .is_some_and(|s| s.contains(&modules(b)))
+}
+
+#[test]
+fn kernel_files_depend_one_way() {
+    let edges = one_way("src");
+    let breaks = layer_breaks(&edges, LAYERS);
+    assert!(breaks.is_empty(), "layer order broken in src/: {breaks:?}");
     // the check sees the edges it should (a test that can fail on a broken scan)
-    let e = |a: &str, b: &str| {
-        let m = |s: &str| s.split("::").map(String::from).collect::<Vec<_>>();
-        edges.get(&m(a)).is_some_and(|s| s.contains(&m(b)))
+    for (a, b) in [
+        ("engine::chunk", "components"),
+        ("engine::forces", "engine::chunk"),
+        ("engine::integrate", "engine::forces"),
+        ("engine::team", "engine::chunk"),
+        ("engine::chunk", "simd"),
+        ("sampling::channel", "simd"),
+    ] {
+        assert!(has(&edges, a, b), "{a} -> {b} not seen: {edges:?}");
+    }
+}
+
+#[test]
+fn binding_files_depend_one_way() {
+    let edges = one_way("bindings/src");
+    for (a, b) in [
+        ("build", "convert"),
+        ("build", "sim"),
+        ("sim", "convert"),
+        ("sim", "arrow"),
+        ("convert", "errors"),
+    ] {
+        assert!(has(&edges, a, b), "{a} -> {b} not seen: {edges:?}");
+    }
+}
+
+/// The rules fail where they should: a synthetic crate with a circle through `crate::`, one
+/// through `super::`, a child naming its parent (allowed) and a broken layer.
+#[test]
+fn the_rules_can_fail() {
+    let crate_of = |files: &[(&str, &str)]| -> Files {
+        files
+            .iter()
+            .map(|(m, t)| (modules(m), t.to_string()))
+            .collect()
     };
-    assert!(e("engine::chunk", "components"), "{edges:?}");
-    assert!(e("engine::forces", "engine::chunk"), "{edges:?}");
-    assert!(e("engine::integrate", "engine::forces"), "{edges:?}");
-    assert!(e("engine::team", "engine::chunk"), "{edges:?}");
+    let cycle = |files: &[(&str, &str)]| {
+        let files = crate_of(files);
+        find_cycle(files.keys().cloned(), &edges_of(&files))
+    };
+    // crate:: circle between siblings, seen with its members
+    let c = cycle(&[
+        ("", "mod a;\nmod b;\n"),
+        ("a", "use crate::b::Thing;\n"),
+        ("b", "fn f() { crate::a::g(); }\n"),
+    ])
+    .expect("a <-> b is a circle");
+    assert_eq!(c.len(), 2, "{c:?}");
+    assert!(
+        c.contains(&"a".to_string()) && c.contains(&"b".to_string()),
+        "{c:?}"
+    );
+    // super:: circle through three files
+    assert!(cycle(&[
+        ("", "mod x;\n"),
+        ("x", "mod p;\nmod q;\nmod r;\n"),
+        ("x::p", "use super::q::A;\n"),
+        ("x::q", "use super::r::B;\n"),
+        ("x::r", "use super::p::C;\n"),
+    ])
+    .is_some());
+    // one way, a child naming its parent's items, a comment, a string and a test module
+    // naming the other way: no circle
+    assert_eq!(
+        cycle(&[
+            ("", "mod a;\nmod b;\n"),
+            ("a", "mod w;\nuse crate::b::Thing;\nfn f() { w::g(); }\n"),
+            ("a::w", "use super::Own;\n"),
+            (
+                "b",
+                "// crate::a::x\nconst S: &str = \"crate::a::y\";\n#[cfg(test)]\nmod tests {\n    use crate::a::z;\n}\n",
+            ),
+        ]),
+        None
+    );
+    // a layer broken by a sampler naming the engine
+    let files = crate_of(&[
+        ("", "mod engine;\nmod sampling;\n"),
+        ("engine", "use crate::sampling::View;\n"),
+        ("sampling", "use crate::engine::simd::dispatch;\n"),
+    ]);
+    let edges = edges_of(&files);
+    assert_eq!(
+        layer_breaks(&edges, LAYERS),
+        vec!["sampling -> engine".to_string()]
+    );
 }

@@ -3,11 +3,11 @@
 //! validation of contact laws live in `granflow::contact::LawSpec`; errors map to Python in
 //! `errors`.
 
+use crate::convert::{law_dict, parse_law, particles, vec3_rows};
 use crate::errors::{param_err, IntoPy};
 use crate::sim::Sim;
 use granflow::components::Plane;
 use granflow::contact::{Form, Hertz, LawInput, LawSpec};
-use granflow::particles::Particles;
 use granflow::scene::{build, DomainSpec, FormKind, SceneSpec};
 use granflow::V3;
 use numpy::{PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
@@ -25,56 +25,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     Ok(())
 }
 
-fn get_f64(d: &Bound<'_, PyDict>, key: &str, prefix: &str) -> PyResult<Option<f64>> {
-    match d.get_item(key)? {
-        None => Ok(None),
-        Some(v) if v.is_none() => Ok(None),
-        Some(v) => v
-            .extract::<f64>()
-            .map(Some)
-            .map_err(|_| param_err(&format!("{prefix}{key}"), v.to_string(), "a number")),
-    }
-}
-
-/// The fields of a contact-law dict (kn, kt, e_n, xi_n, xi_t_ratio, mu; missing or None: the
-/// kernel's default), unknown keys refused.
-fn law_input(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawInput> {
-    const ALLOWED: [&str; 6] = ["kn", "kt", "e_n", "xi_n", "xi_t_ratio", "mu"];
-    for k in d.keys() {
-        let k: String = k.extract()?;
-        if !ALLOWED.contains(&k.as_str()) {
-            return Err(param_err(
-                &format!("{prefix}{k}"),
-                "(unknown key)",
-                &format!("one of {ALLOWED:?}"),
-            ));
-        }
-    }
-    let f = |k: &str| get_f64(d, k, prefix);
-    Ok(LawInput {
-        kn: f("kn")?,
-        kt: f("kt")?,
-        e_n: f("e_n")?,
-        xi_n: f("xi_n")?,
-        xi_t_ratio: f("xi_t_ratio")?,
-        mu: f("mu")?,
-    })
-}
-
-/// Parse a contact-law dict into a resolved, validated law (`LawSpec::resolve`).
-pub fn parse_law(d: &Bound<'_, PyDict>, prefix: &str) -> PyResult<LawSpec> {
-    LawSpec::resolve(&law_input(d, prefix)?, prefix).py_err()
-}
-
-/// A resolved law as a dict: kn, kt, e_n or xi_n, xi_t_ratio, mu.
-pub fn law_dict<'py>(py: Python<'py>, law: &LawSpec) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    for (k, v) in law.entries() {
-        d.set_item(k, v)?;
-    }
-    Ok(d)
-}
-
 /// The kernel's resolution of a contact-law dict: every field filled with its default
 /// (kn 1e6, kt 2/7 kn, e_n 0.82 unless xi_n is given, xi_t_ratio 1/2, mu 0.5) and validated;
 /// an invalid law raises ParameterError.
@@ -83,36 +33,12 @@ fn resolve_law<'py>(py: Python<'py>, law: &Bound<'py, PyDict>) -> PyResult<Bound
     law_dict(py, &parse_law(law, "")?)
 }
 
-pub fn vec3_rows(a: &PyReadonlyArray2<'_, f64>, name: &str, n: Option<usize>) -> PyResult<Vec<V3>> {
-    let a = a.as_array();
-    if a.ncols() != 3 || n.is_some_and(|n| a.nrows() != n) {
-        return Err(param_err(
-            name,
-            format!("shape {:?}", a.shape()),
-            "an (N, 3) array with one row per particle",
-        ));
-    }
-    Ok(a.rows()
-        .into_iter()
-        .map(|r| V3::new(r[0], r[1], r[2]))
-        .collect())
-}
-
-fn particles(
-    x: &PyReadonlyArray2<'_, f64>,
-    diameter: &PyReadonlyArray1<'_, f64>,
-    density: f64,
-) -> PyResult<Particles> {
-    let xs = vec3_rows(x, "positions", None)?;
-    let d = diameter.as_array().to_vec();
-    Particles::new(xs, &d, density).py_err()
-}
-
 /// Build a simulation in an orthogonal box (periodic flag per axis), with optional planar walls
 /// and gravity. `form`: "hooke" or "hertz". Friction (tangential history) is compiled in only
-/// when mu > 0 for the particles or the walls.
+/// when mu > 0 for the particles or the walls. `dt`, `skin`: None gives the kernel's default
+/// (dt from the contact time, skin `DEFAULT_SKIN`).
 #[pyfunction]
-#[pyo3(signature = (x, diameter, density, lo, length, periodic, form, law, walls=None, wall_law=None, gravity=None, dt=None, skin=0.3, v=None, omega=None))]
+#[pyo3(signature = (x, diameter, density, lo, length, periodic, form, law, walls=None, wall_law=None, gravity=None, dt=None, skin=None, v=None, omega=None))]
 #[allow(
     clippy::too_many_arguments,
     reason = "the Python signature of box_sim, keyword arguments with defaults"
@@ -130,7 +56,7 @@ fn box_sim(
     wall_law: Option<&Bound<'_, PyDict>>,
     gravity: Option<[f64; 3]>,
     dt: Option<f64>,
-    skin: f64,
+    skin: Option<f64>,
     v: Option<PyReadonlyArray2<'_, f64>>,
     omega: Option<PyReadonlyArray2<'_, f64>>,
 ) -> PyResult<Sim> {
@@ -157,7 +83,9 @@ fn box_sim(
     spec.form = FormKind::parse(form).py_err()?;
     spec.gravity = gravity.map(V3::from);
     spec.dt = dt;
-    spec.skin = skin;
+    if let Some(skin) = skin {
+        spec.skin = skin;
+    }
     Sim::new(build(spec).py_err()?, "box")
 }
 
@@ -247,9 +175,10 @@ fn contact_time(law: &Bound<'_, PyDict>, m_eff: f64) -> PyResult<f64> {
 }
 
 /// The stress-controlled triclinic cell of 002: particles in a cubic periodic cell of side
-/// `length`, imposed p_ext and tau_ext (xy), cell mass `wg`. No walls, no gravity.
+/// `length`, imposed p_ext and tau_ext (xy), cell mass `wg`. No walls, no gravity. `dt`,
+/// `skin`: None gives the kernel's default (as `box_sim`).
 #[pyfunction]
-#[pyo3(signature = (x, diameter, density, length, form, law, p_ext, tau_ext, wg, dt=None, skin=0.3))]
+#[pyo3(signature = (x, diameter, density, length, form, law, p_ext, tau_ext, wg, dt=None, skin=None))]
 #[allow(
     clippy::too_many_arguments,
     reason = "the Python signature of cell_sim, keyword arguments with defaults"
@@ -265,7 +194,7 @@ fn cell_sim(
     tau_ext: f64,
     wg: f64,
     dt: Option<f64>,
-    skin: f64,
+    skin: Option<f64>,
 ) -> PyResult<Sim> {
     let p = particles(&x, &diameter, density)?;
     let domain = DomainSpec::Cell {
@@ -277,6 +206,8 @@ fn cell_sim(
     let mut spec = SceneSpec::new(p, parse_law(law, "")?, domain);
     spec.form = FormKind::parse(form).py_err()?;
     spec.dt = dt;
-    spec.skin = skin;
+    if let Some(skin) = skin {
+        spec.skin = skin;
+    }
     Sim::new(build(spec).py_err()?, "cell")
 }

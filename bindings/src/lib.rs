@@ -1,13 +1,17 @@
 //! Python bindings of granflow: the only crate that knows Python.
 //!
 //! - `errors`: every `granflow::Error` variant maps onto one Python exception, in one place.
+//! - `convert`: Python arguments into kernel values and back (a leaf: `build` and `sim` use it).
 //! - `arrow`: sample tables leave as Arrow C data (PyCapsule interface), no per-row copies.
 //! - `sim`: `Sim`, a handle on any composed engine; runs release the GIL.
+//! - `build`: the constructors (`box_sim`, `cell_sim`, ...), Python arguments into a
+//!   `granflow::scene::SceneSpec`.
 
 use pyo3::prelude::*;
 
 mod arrow;
 mod build;
+mod convert;
 mod errors;
 mod sim;
 
@@ -32,5 +36,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim::read_checkpoint_header, m)?)?;
     m.add_function(wrap_pyfunction!(core_round_trip_ns, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // the kernel's default neighbour-list skin (what `skin=None` gives), for Python to read
+    m.add("DEFAULT_SKIN", granflow::scene::DEFAULT_SKIN)?;
     Ok(())
 }

@@ -258,14 +258,14 @@ impl Sim {
     /// The particle–particle law in use, resolved by the kernel (every field filled):
     /// kn, kt, e_n or xi_n, xi_t_ratio, mu.
     fn law<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        crate::build::law_dict(py, &self.inner.law())
+        crate::convert::law_dict(py, &self.inner.law())
     }
 
     /// The particle–wall law in use (None without walls).
     fn wall_law<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         self.inner
             .wall_law()
-            .map(|l| crate::build::law_dict(py, &l))
+            .map(|l| crate::convert::law_dict(py, &l))
             .transpose()
     }
 

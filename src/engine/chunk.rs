@@ -8,11 +8,10 @@
 //!
 //! Compiled twice: with AVX2 (four lanes per instruction, the pair records transposed into
 //! lanes with shuffles) and for baseline x86-64; the CPU picks at run time
-//! (`super::simd::dispatch`). Both do the same IEEE operations in the same order, and the sums
+//! (`crate::simd::dispatch`). Both do the same IEEE operations in the same order, and the sums
 //! have the order of the pair list, so the result is the same bits for either path and any
 //! number of threads.
 
-use super::simd::{dispatch, Twin};
 use crate::components::{Body, Plane, Walls, MAX_WALLS};
 use crate::contact::lanes::{Ln, PairIn, V};
 use crate::contact::{Form, Friction, Law};
@@ -20,6 +19,7 @@ use crate::domain::Domain;
 use crate::history::{Cursor, HistList};
 use crate::neighbor::{image_shifts, InnerChunk, NeighborList};
 use crate::sampling::{ContactRec, WALL};
+use crate::simd::{dispatch, Twin};
 use crate::{M3, V3};
 use std::cell::RefCell;
 use std::marker::PhantomData;

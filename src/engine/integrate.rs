@@ -2,15 +2,15 @@
 //! fused with the packing of the pair loop's records (plain NVE, or a deforming cell's affine
 //! maps), and the cross-chunk pass that completes the forces and applies the final half-kick.
 //! Each pass works chunk by chunk with a baseline body and an AVX2 twin (`wide`), chosen by
-//! `super::simd::dispatch`: the same IEEE operations in the same order, so the same bits.
+//! `crate::simd::dispatch`: the same IEEE operations in the same order, so the same bits.
 
 use super::chunk::{add10, PairOut};
 use super::forces::stat_pieces;
-use super::simd::{dispatch, Twin};
 use super::{Body, Engine, Walls};
 use crate::contact::{Form, Friction};
 use crate::domain::Domain;
 use crate::neighbor::{chunk_size, NeighborList};
+use crate::simd::{dispatch, Twin};
 use crate::{M3, V3};
 use rayon::prelude::*;
 use std::marker::PhantomData;

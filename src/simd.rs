@@ -1,6 +1,7 @@
 //! The one run-time choice of instruction set. Each hot pass over a chunk has a baseline body
 //! and an AVX2 twin that does the same IEEE operations in the same order (so the same bits);
 //! [`dispatch`] runs the twin when the CPU has AVX2 ([`crate::contact::lanes::wide`]).
+//! A leaf below the engine and the samplers, which both dispatch their passes through it.
 
 /// A pass over one chunk with a baseline body and an AVX2 twin.
 pub(crate) trait Twin: Sized {
