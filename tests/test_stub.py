@@ -22,6 +22,9 @@ def _stub_names() -> tuple[set[str], dict[str, set[str]]]:
     for node in tree.body:
         if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
             top.add(node.name)
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) \
+                and not node.target.id.startswith("_"):
+            top.add(node.target.id)
         if isinstance(node, ast.ClassDef):
             members[node.name] = {n.name for n in node.body if isinstance(n, ast.FunctionDef)}
     return top, members

@@ -10,6 +10,8 @@ import numpy.typing as npt
 _F64Array = npt.NDArray[np.float64]
 
 __version__: str
+#: the kernel's neighbour-list skin when none is given (granflow::scene::DEFAULT_SKIN)
+DEFAULT_SKIN: float
 
 __all__ = [
     "GranflowError",
@@ -29,6 +31,7 @@ __all__ = [
     "read_checkpoint_header",
     "core_round_trip_ns",
     "__version__",
+    "DEFAULT_SKIN",
 ]
 
 class GranflowError(Exception): ...
@@ -124,7 +127,7 @@ def box_sim(
     wall_law: Mapping[str, float] | None = None,
     gravity: Sequence[float] | None = None,
     dt: float | None = None,
-    skin: float = ...,
+    skin: float | None = None,
     v: _F64Array | None = None,
     omega: _F64Array | None = None,
 ) -> Sim: ...
@@ -139,7 +142,7 @@ def cell_sim(
     tau_ext: float,
     wg: float,
     dt: float | None = None,
-    skin: float = ...,
+    skin: float | None = None,
 ) -> Sim: ...
 def insert_spheres(
     diameter: _F64Array,

@@ -23,7 +23,6 @@ pair (``DtRule.tc_fraction(0.02)``); None is the kernel's default (t_c/50, light
 from __future__ import annotations
 
 import dataclasses
-import inspect
 from dataclasses import dataclass
 from typing import Any
 
@@ -79,9 +78,9 @@ class DtRule:
 
 
 def kernel_default_skin() -> float:
-    """The kernel's default neighbour-list skin (``granflow::scene::DEFAULT_SKIN``), read from
-    the binding's signature: the value a simulation gets when no skin is passed."""
-    return float(inspect.signature(_core.box_sim).parameters["skin"].default)
+    """The kernel's default neighbour-list skin (``granflow::scene::DEFAULT_SKIN``): the value
+    a simulation gets when no skin is passed."""
+    return float(_core.DEFAULT_SKIN)
 
 
 def law_contact_time(law: ContactLaw, diameters: np.ndarray, density: float = 1.0) -> float:

@@ -126,8 +126,6 @@ class Simulation:
             )
         if self.law.form not in ("hooke", "hertz"):
             raise ParameterError(f"invalid form = {self.law.form!r}: allowed 'hooke' or 'hertz'")
-        # the skin is passed only when set: unset, the kernel's default applies
-        extra: dict[str, Any] = {} if self.skin is None else {"skin": float(self.skin)}
         self._sim = _core.box_sim(
             x,
             d,
@@ -145,7 +143,7 @@ class Simulation:
             omega=None
             if self.angular_velocities is None
             else np.ascontiguousarray(self.angular_velocities, float),
-            **extra,
+            skin=None if self.skin is None else float(self.skin),  # None: the kernel's default
         )
         if self.threads is not None:
             self._sim.threads = int(self.threads)

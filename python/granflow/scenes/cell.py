@@ -193,10 +193,9 @@ class ShearCell(SceneParameters):
         x = np.asarray(_core.insert_spheres(d, (0, 0, 0), (length,) * 3, (True,) * 3, self.seed))
         # 002's gamma_n = gamma_n_tc/t_c (rate form), or the kernel's restitution form
         law = mat.law(d).as_dict()
-        skin = {} if mat.skin is None else {"skin": float(mat.skin)}
         core = _core.cell_sim(x, d, mat.density, float(length), mat.form, law,
                               float(self.p_ext), float(self.tau_ratio * self.p_ext),
-                              float(self.w_g), dt=self.timestep, **skin)
+                              float(self.w_g), dt=self.timestep, skin=mat.skin)
         if self.threads:
             core.threads = int(self.threads)
         self._h0 = np.asarray(core.cell()[0])
