@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import resource
 import time
 from pathlib import Path
@@ -29,8 +28,9 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args()
-    ch = Channel(W=a.W, B=a.B, H=a.H, phi_bar=a.phi, kn=a.kn, dt=1.2e-4 * math.sqrt(1e6 / a.kn),
-                 seed=a.seed, threads=a.threads, sample_every=None)
+    # dt: the material's rule, 000's 1.2e-4 sqrt(1e6/kn)
+    ch = Channel(W=a.W, B=a.B, H=a.H, phi_bar=a.phi, kn=a.kn, seed=a.seed, threads=a.threads,
+                 sample_every=None)
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     ch.prepare(progress=True)

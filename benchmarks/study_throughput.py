@@ -48,7 +48,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import math  # noqa: E402
 import platform  # noqa: E402
 import sys
 import tempfile
@@ -61,7 +60,7 @@ from typing import Any
 import granflow as gf
 import numpy as np
 from granflow.io import _jsonable
-from granflow.material import kernel_default_skin
+from granflow.material import MATERIAL_000, kernel_default_skin
 from granflow.scenes.cell import ShearCell
 from granflow.scenes.channel import Channel
 
@@ -77,7 +76,7 @@ KN = 1.0e5
 KT = KN * 2.0 / 7.0
 E_N = 0.82
 MU = 0.5
-DT = 1.2e-4 * math.sqrt(1.0e6 / KN)  # the Channel default (for kn = 1e6) scaled to kn = 1e5
+DT = float(MATERIAL_000.with_(kn=KN).dt() or 0.0)  # the channel's dt rule at this kn
 SKIN = kernel_default_skin()  # the kernel's default, used by both codes
 SEED = 1
 FLOW_STEPS = 22_000  # t = 8.3, the flow time of compare_lammps's developed state

@@ -30,8 +30,8 @@ from granflow.analysis.rheology import GRADIENT_COLUMNS
 
 from ._campaign.cell import OBSERVABLES, Plan, Point, channel_material
 
-#: the channel's particle friction (000: mu = 0.5), the cell's mu_s
-MU_CHANNEL = 0.5
+#: the channel's particle friction (its material's: 000's mu = 0.5), the cell points' mu_s
+MU_CHANNEL = channel_material().mu_value
 #: the channel's pressure scale, sigma_xx d/kn: 1.7e-4 (W = 20) to 5.3e-4 (W = 60) in the
 #: reproduce_000 runs at kn = 1e5; the cell's p_ext a/kn (kn = 1 there) at both ends
 P_LOW, P_HIGH = 2e-4, 5e-4
