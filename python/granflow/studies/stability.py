@@ -294,10 +294,11 @@ def _gas(
 
 
 def _overlap_pair(overlap: float) -> Outcome:
-    """Two resting unit spheres overlapping by ``overlap`` diameters, non-periodic, no walls."""
+    """Two resting unit spheres of 000's material overlapping by ``overlap`` diameters,
+    non-periodic, no walls."""
     box = Box(length=(20.0, 20.0, 20.0), periodic=(False,) * 3)
     x = np.array([[10.0, 10.0, 10.0], [11.0 - overlap, 10.0, 10.0]])
-    sim = Simulation(x, np.ones(2), box, ContactLaw(kn=1e6, e_n=0.82, mu=0.5))
+    sim = Simulation(x, np.ones(2), box, MATERIAL_000.law())  # 000's contact law
     tr, fin = drive(sim, 400, n_samples=20)
     v = sim.get_velocities()
     return Outcome(tr, nan_free=fin, n=2, steps=400,
