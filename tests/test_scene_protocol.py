@@ -93,6 +93,11 @@ def test_a_checkpoint_of_another_scene_is_refused(tmp_path):
     g.run(10, progress=False, checkpoint=tmp_path / "g.gfck")
     with pytest.raises(gf.ParameterError, match="'gas'.*allowed a 'cell' checkpoint"):
         FACTORIES["cell"]().restore(tmp_path / "g.gfck")
+    # a checkpoint without a scene header (a bare Simulation's, or an older granflow's)
+    sim = g.core
+    sim.save_checkpoint(str(tmp_path / "bare.gfck"), "{}")
+    with pytest.raises(gf.ParameterError, match="no scene header.*allowed a 'cell'"):
+        FACTORIES["cell"]().restore(tmp_path / "bare.gfck")
 
 
 def test_run_writes_checkpoints_every_n_steps_and_at_the_end(scene_kind, tmp_path, monkeypatch):

@@ -158,10 +158,14 @@ def read_checkpoint_state(path: str | os.PathLike[str], scene_name: str) -> dict
     another scene, or none, is refused."""
     params = _core.read_checkpoint_header(os.fspath(path))[1]
     head = json.loads(params or "{}").get("scene")
-    if not isinstance(head, dict) or head.get("scene") != scene_name:
-        got = head.get("scene") if isinstance(head, dict) else None
+    if not isinstance(head, dict):
+        raise ParameterError(
+            f"invalid checkpoint {os.fspath(path)!r}: it has no scene header (written by a "
+            "bare Simulation, or by a granflow older than the scenes' one checkpoint layout, "
+            f"which cannot be resumed): allowed a {scene_name!r} scene's checkpoint")
+    if head.get("scene") != scene_name:
         raise ParameterError(f"invalid checkpoint {os.fspath(path)!r}: written by scene "
-                             f"{got!r}: allowed a {scene_name!r} checkpoint")
+                             f"{head.get('scene')!r}: allowed a {scene_name!r} checkpoint")
     return dict(head.get("state", {}))
 
 
