@@ -101,27 +101,32 @@ class SceneParameters:
     seed: int = 0
     threads: int | None = None
 
+    #: the scene's own material, when ``material`` is None
+    default_material: ClassVar[Material]
 
-def material_overrides(scene: Any) -> dict[str, Any]:
-    """The flat material overrides a scene was given (those not None)."""
-    return {k: getattr(scene, k) for k in MATERIAL_KEYS if getattr(scene, k) is not None}
+    def _resolve_material(self) -> Material:
+        """Set ``material`` to the scene's material: ``material`` (a :class:`Material`, a name
+        of :data:`granflow.material.MATERIALS`, or None for ``default_material``) with the
+        flat overrides that are not None applied (:meth:`Material.with_`); returns it."""
+        given = self.material
+        if given is None:
+            base = self.default_material
+        elif isinstance(given, Material):
+            base = given
+        elif isinstance(given, str) and given in MATERIALS:
+            base = MATERIALS[given]
+        else:
+            raise ParameterError(f"invalid material = {given!r}: allowed a Material or one of "
+                                 f"{sorted(MATERIALS)}")
+        overrides = {k: getattr(self, k) for k in MATERIAL_KEYS if getattr(self, k) is not None}
+        self.material = base.with_(**overrides) if overrides else base
+        return self.material
 
-
-def resolve_material(given: Material | str | None, default: Material,
-                     overrides: Mapping[str, Any]) -> Material:
-    """A scene's material: ``given`` (a :class:`Material`, a name of
-    :data:`granflow.material.MATERIALS`, or None for the scene's ``default``) with the flat
-    ``overrides`` applied (:meth:`Material.with_`)."""
-    if given is None:
-        base = default
-    elif isinstance(given, Material):
-        base = given
-    elif isinstance(given, str) and given in MATERIALS:
-        base = MATERIALS[given]
-    else:
-        raise ParameterError(f"invalid material = {given!r}: allowed a Material or one of "
-                             f"{sorted(MATERIALS)}")
-    return base.with_(**overrides) if overrides else base
+    @property
+    def mat(self) -> Material:
+        """The scene's material (``material`` with the flat overrides applied)."""
+        assert isinstance(self.material, Material), "the scene has not resolved its material"
+        return self.material
 
 
 def check_run_keys(params: Mapping[str, Any], cls: type) -> None:

@@ -57,10 +57,8 @@ from ._base import (
     SampleTables,
     SceneParameters,
     check_run_keys,
-    material_overrides,
     read_checkpoint_state,
     register,
-    resolve_material,
     run_with_checkpoints,
     write_checkpoint,
 )
@@ -124,6 +122,7 @@ class ShearCell(SceneParameters):
     sample_every: int | None = 200
 
     scene_name: ClassVar[str]
+    default_material: ClassVar[Material] = MATERIAL_002
     #: the runner writes the statistical-error report of a finished run
     error_report: ClassVar[bool] = True
 
@@ -145,8 +144,7 @@ class ShearCell(SceneParameters):
                                  "integer >= 1, or None for no observables")
         if self.start not in STARTS:
             raise ParameterError(f"invalid start = {self.start!r}: allowed one of {STARTS}")
-        self.material = mat = resolve_material(self.material, MATERIAL_002,
-                                               material_overrides(self))
+        mat = self._resolve_material()
         d = mat.sizes.diameters_for_volume(self.N * mat.sizes.mean_volume, self.seed)
         self._d = d
         self._vs = vs = solid_volume(d)
@@ -167,12 +165,6 @@ class ShearCell(SceneParameters):
         self.wall_seconds = 0.0
         #: time at which tau_ext acts (after the compaction of a "compacted" start)
         self.shear_start_time: float | None = None
-
-    @property
-    def mat(self) -> Material:
-        """The cell's material (``material`` with the flat overrides applied)."""
-        assert isinstance(self.material, Material)
-        return self.material
 
     @property
     def n(self) -> int:

@@ -61,10 +61,8 @@ from ._base import (
     SampleTables,
     SceneParameters,
     check_run_keys,
-    material_overrides,
     read_checkpoint_state,
     register,
-    resolve_material,
     run_with_checkpoints,
     write_checkpoint,
 )
@@ -180,24 +178,19 @@ class Channel(SceneParameters):
     prep_kn: float = 1e4
 
     scene_name: ClassVar[str]
+    default_material: ClassVar[Material] = MATERIAL_000
     #: the runner writes the statistical-error report of a finished run
     error_report: ClassVar[bool] = True
     #: gravity along -y, of unit magnitude (the unit of acceleration, g)
     gravity: ClassVar[tuple[float, float, float]] = (0.0, -1.0, 0.0)
 
     def __post_init__(self) -> None:
-        self.material = resolve_material(self.material, MATERIAL_000, material_overrides(self))
+        self._resolve_material()
         self._validate()
         self._sim: Simulation | None = None
         self.prep_info: dict[str, Any] = {}
         self._tables = SampleTables()
         self.pbc = (False, True, True)
-
-    @property
-    def mat(self) -> Material:
-        """The channel's material (``material`` with the flat overrides applied)."""
-        assert isinstance(self.material, Material)
-        return self.material
 
     # -- parameters ------------------------------------------------------------------------
     def _validate(self) -> None:

@@ -30,10 +30,8 @@ from ._base import (
     SampleTables,
     SceneParameters,
     check_run_keys,
-    material_overrides,
     read_checkpoint_state,
     register,
-    resolve_material,
     run_with_checkpoints,
     write_checkpoint,
 )
@@ -67,6 +65,7 @@ class PeriodicGas(SceneParameters):
     sample_every: int = 100
 
     scene_name: ClassVar[str]
+    default_material: ClassVar[Material] = GAS_MATERIAL
     #: no statistical-error report (the gas has no steady figures)
     error_report: ClassVar[bool] = False
 
@@ -74,16 +73,10 @@ class PeriodicGas(SceneParameters):
         if not (isinstance(self.sample_every, int) and self.sample_every >= 1):
             raise ParameterError(
                 f"invalid sample_every = {self.sample_every!r}: allowed an integer >= 1")
-        self.material = resolve_material(self.material, GAS_MATERIAL, material_overrides(self))
+        self._resolve_material()
         self._sim: Simulation | None = None
         self._tables = SampleTables()
         self.pbc = (True, True, True)
-
-    @property
-    def mat(self) -> Material:
-        """The gas's material (``material`` with the flat overrides applied)."""
-        assert isinstance(self.material, Material)
-        return self.material
 
     def _add_samplers(self, core: _core.Sim) -> None:
         # the series is taken inside the kernel's step loop
