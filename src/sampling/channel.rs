@@ -19,6 +19,9 @@ use crate::error::{Error, Result};
 use crate::table::Table;
 use std::f64::consts::PI;
 
+/// Random channel states for the tests and the channel_sums bench (not part of the API).
+#[doc(hidden)]
+pub mod fixtures;
 mod series;
 pub use series::Series;
 
@@ -579,67 +582,6 @@ mod tests {
         }
     }
 
-    /// Random spheres (d 0.8..1.2) in a 20 x 30 x 10 channel, and `per` random contacts for
-    /// each chunk of `ch` (a tenth on walls; branch vectors of a contact's length in any
-    /// direction, some along y: no length across x).
-    fn random_state(
-        n: usize,
-        ch: usize,
-        per: usize,
-    ) -> (crate::particles::Particles, Vec<Vec<ContactRec>>) {
-        use crate::particles::Particles;
-        use crate::V3;
-        let mut rng = crate::rng::Rng::new(7);
-        let x: Vec<V3> = (0..n)
-            .map(|_| {
-                V3::new(
-                    20.0 * rng.uniform(),
-                    30.0 * rng.uniform(),
-                    10.0 * rng.uniform(),
-                )
-            })
-            .collect();
-        let d: Vec<f64> = (0..n).map(|_| 0.8 + 0.4 * rng.uniform()).collect();
-        let mut p = Particles::new(x, &d, 1.0).unwrap();
-        for i in 0..n {
-            p.v[i] = V3::new(
-                rng.uniform() - 0.5,
-                rng.uniform() - 0.5,
-                rng.uniform() - 0.5,
-            );
-            p.omega[i] = V3::new(rng.uniform(), rng.uniform(), rng.uniform());
-        }
-        let recs = (0..n.div_ceil(ch))
-            .map(|c| {
-                let len = ch.min(n - c * ch);
-                (0..per)
-                    .map(|k| {
-                        let i = c * ch + (k * 7) % len;
-                        let wall = rng.uniform() < 0.1;
-                        let u = V3::new(
-                            rng.uniform() - 0.5,
-                            rng.uniform() - 0.5,
-                            rng.uniform() - 0.5,
-                        );
-                        let dv = if k % 97 == 0 {
-                            V3::new(0.0, 1.0, 0.0)
-                        } else {
-                            u.normalize() * (0.5 + 0.6 * rng.uniform())
-                        };
-                        ContactRec {
-                            i: i as u32,
-                            j: if wall { WALL } else { ((i + 1) % n) as u32 },
-                            d: dv,
-                            f: V3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, rng.uniform()),
-                            power: -rng.uniform(),
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
-        (p, recs)
-    }
-
     fn view_of<'a>(
         p: &'a crate::particles::Particles,
         recs: &'a [Vec<ContactRec>],
@@ -667,7 +609,7 @@ mod tests {
     #[test]
     fn sums_keep_their_bits() {
         let (n, ch) = (3000, 750);
-        let (p, recs) = random_state(n, ch, 1100);
+        let (p, recs) = super::fixtures::random_state(n, ch, 1100);
         let view = view_of(&p, &recs);
         let mut uniform = vec![0.0, 1.5];
         uniform.extend((1..18).map(|k| 1.5 + k as f64));
