@@ -32,6 +32,9 @@ class FlowState(str, Enum):
       within its error): no flow.
     * ``ACCELERATING`` ("accelerating") / ``DECELERATING`` ("decelerating"): channel and cell;
       a significant drift, not a steady state.
+    * ``DRIFTING`` ("drifting"): cell; flowing, but a reported quantity drifts across the
+      steady part (its first and last thirds differ beyond their errors,
+      :func:`granflow.analysis.stats.stationarity`): not averaged, not fitted.
 
     Recorded by campaigns (:mod:`granflow.studies`), not classified from data:
 
@@ -47,6 +50,7 @@ class FlowState(str, Enum):
     ARRESTED = "arrested"
     ACCELERATING = "accelerating"
     DECELERATING = "decelerating"
+    DRIFTING = "drifting"
     SHORT = "short"
     RUNAWAY = "runaway"
     FAILED = "failed"

@@ -28,10 +28,13 @@ from ._numerics import quiet
 from .laws import jop_law, power_law
 from .stats import (
     DEFAULT_MIN_BLOCKS,
+    DRIFT_Z,
+    Stationarity,
     SteadyStart,
     Trend,
     blocking,
     blocking_many,
+    stationarity,
     steady_state_start,
     trend,
 )
@@ -187,6 +190,8 @@ def reference_curve(
 _NON_OBSERVABLE_PREFIXES = ("H_", "F_")
 _NON_OBSERVABLES = {"step", "t", "tilt_flips"}
 KEY_COLUMNS = ("shear_rate", "phi", "p", "mu1")
+#: the quantities whose drift makes a flowing run "drifting" (those the campaigns report)
+DRIFT_COLUMNS = ("I", "phi", "mu1", "mu2")
 _SHEAR_COMPONENTS = ("L_xy", "L_yx", "L_xz", "L_zx", "L_yz", "L_zy")
 
 
@@ -236,6 +241,11 @@ class CellState:
     * ``accelerating`` / ``decelerating``: the shear rate drifts over the steady part (linear
       trend with ``|t| > t_sig``, slope SE corrected for serial correlation, and relative change
       across the part above ``max_rel_drift``): not steady, not averaged.
+    * ``drifting``: flowing, but a quantity of ``drift_columns`` (I, phi, mu1, mu2) drifts
+      across the steady part: the means of its first and last thirds differ by more than
+      ``z_drift`` of their SEs (:func:`granflow.analysis.stats.stationarity`; ``drift_z`` and
+      ``drift_quantity`` say which and how far). Near the runaway ratio the flow drifts for
+      thousands of t_c, and MSER alone takes a start inside the drift.
     * ``flowing``: steady flow.
 
     ``averaged`` is True for flowing and arrested runs.  ``settled`` is False if MSER put the
@@ -251,6 +261,8 @@ class CellState:
     shear_mean: float
     shear_se: float
     trend: dict[str, float] = field(default_factory=dict)
+    drift_z: float = math.nan
+    drift_quantity: str = ""
 
 
 @quiet
@@ -277,6 +289,8 @@ def classify_run(
     t_sig: float = 3.0,
     max_rel_drift: float = 0.1,
     rate_floor: float = 0.0,
+    drift_columns: Sequence[str] = DRIFT_COLUMNS,
+    z_drift: float = DRIFT_Z,
 ) -> CellState:
     """Classify a cell run as flowing, arrested, accelerating or decelerating (a
     :class:`granflow.states.FlowState`; criteria in :class:`CellState`)."""
@@ -308,10 +322,15 @@ def classify_run(
     if "shear_rate" in names:
         tr = trend(tt, column(series, "shear_rate")[start:])
     state = FlowState.FLOWING
+    drifting = {c: column(series, c)[start:] for c in drift_columns if c in names}
+    drift = (stationarity(drifting, z_max=z_drift) if drifting
+             else Stationarity({}, "", math.nan, True, False))
     if arrested:
         state = FlowState.ARRESTED
     elif tr is not None and abs(tr.t_stat) > t_sig and abs(tr.rel_drift) > max_rel_drift:
         state = FlowState.ACCELERATING if tr.slope > 0 else FlowState.DECELERATING
+    elif drift.tested and not drift.stationary:
+        state = FlowState.DRIFTING
     return CellState(
         state,
         state in (FlowState.FLOWING, FlowState.ARRESTED),
@@ -322,6 +341,8 @@ def classify_run(
         smean,
         sse,
         asdict(tr) if tr is not None else {},
+        drift.max_abs_z,
+        drift.worst,
     )
 
 

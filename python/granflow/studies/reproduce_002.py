@@ -41,8 +41,6 @@ RATIOS: dict[float, tuple[float, ...]] = {
     0.1: (0.25, 0.3, 0.35, 0.4, 0.45, 0.5),
     0.3: (0.4, 0.45, 0.5, 0.55, 0.6, 0.65),
 }
-#: lower pressures at mu_s = 0.3 (one seed)
-LOWER_P: dict[float, tuple[float, ...]] = {1e-5: (0.45, 0.5, 0.55), 1e-6: (0.5, 0.55)}
 #: ratios added after the first pass: nearer yield at mu_s = 0.3, to pin mu1_0 (run last)
 NEAR_YIELD: dict[float, tuple[float, ...]] = {0.3: (0.36, 0.38)}
 RUNAWAY: dict[float, float] = {0.0: 0.5, 0.01: 0.5, 0.1: 0.6, 0.3: 0.7}
@@ -53,23 +51,26 @@ MORE_RATIOS: dict[float, tuple[float, ...]] = {
 }
 
 
+#: independent seeds of every point (its value is their mean, its SE from their spread and
+#: their own SEs: granflow.analysis.replicas)
+REPLICAS = 3
+
+
 def full_plan() -> Plan:
-    """mu_s in {0, 0.01, 0.1, 0.3} at N = 2000 (seed 1, then seed 2), a runaway probe per mu_s,
-    N = 10,000 at mu_s = 0.3 (the size effect), mu_s in {0.03, 0.2} (two seeds), two ratios
-    nearer yield at mu_s = 0.3, then p_ext = 1e-5 and 1e-6 at mu_s = 0.3 (one seed)."""
-    pts: list[Point] = []
-    for seed in (1, 2):
-        pts += [Point(mu, r, seed) for mu, rs in RATIOS.items() for r in rs]
+    """The six mu_s at N = 2000, p_ext = 1e-4: the ratios of RATIOS, MORE_RATIOS and
+    NEAR_YIELD, REPLICAS seeds each, then a runaway probe per mu_s of RUNAWAY (one seed).
+    Ordered by cost: every mu_s's highest ratio first (fast flow), down to the ratios near
+    yield (slow flow, the longest runs); a ratio's seeds one after another, so that a campaign
+    stopped part way leaves complete replica sets."""
+    ratios = {mu: sorted({*rs, *NEAR_YIELD.get(mu, ())}, reverse=True)
+              for mu, rs in sorted({**RATIOS, **MORE_RATIOS}.items())}
+    pts = [Point(mu, rs[k], seed)
+           for k in range(max(map(len, ratios.values())))
+           for mu, rs in ratios.items() if k < len(rs)
+           for seed in range(1, REPLICAS + 1)]
     pts += [Point(mu, r, 1) for mu, r in RUNAWAY.items()]
-    pts += [Point(0.3, r, 1, N=10_000) for r in (0.45, 0.5, 0.55, 0.6)]
-    for seed in (1, 2):
-        pts += [Point(mu, r, seed) for mu, rs in MORE_RATIOS.items() for r in rs]
-    for seed in (1, 2):
-        pts += [Point(mu, r, seed) for mu, rs in NEAR_YIELD.items() for r in rs]
-    # is the offset from 002's curves the pressure? (its fits pool 1e-4, 1e-5, 1e-6)
-    pts += [Point(0.3, r, 1, p_ext=p) for p, rs in LOWER_P.items() for r in rs]
-    # (4,000,000 and 400,000 steps)
-    return Plan("full", tuple(pts), max_shear={2000: 80_000.0, 10_000: 8_000.0})
+    # (4,000,000 steps)
+    return Plan("full", tuple(pts), max_shear={2000: 80_000.0})
 
 
 def ratio_range(mu_s: float, n: int = 8) -> tuple[float, ...]:
@@ -94,8 +95,10 @@ def paper_plan() -> Plan:
 
 
 def quick_plan() -> Plan:
-    """Minutes on two cores: N = 500, mu_s = 0.3, four ratios, one seed, SE target 2 %."""
-    pts = tuple(Point(0.3, r, 1, N=500) for r in (0.45, 0.5, 0.55, 0.6))
+    """Minutes on two cores: N = 500, mu_s = 0.3, four ratios, REPLICAS seeds, SE target
+    2 %."""
+    pts = tuple(Point(0.3, r, seed, N=500) for r in (0.45, 0.5, 0.55, 0.6)
+                for seed in range(1, REPLICAS + 1))
     # (stints of 25,000 steps, at most 200,000)
     return Plan("quick", pts, se_target=0.02, max_shear={500: 4_000.0}, stint=500.0)
 

@@ -3,6 +3,7 @@
 * :mod:`.fp_blocking` — Flyvbjerg-Petersen blocking: the SE of a mean (its conventions and the
   plateau rule are in that module's docstring), of many means at once, of a ratio of means.
 * :mod:`.steady` — the end of the start-up transient (MSER) and the trend test.
+* :mod:`.stationarity` — the thirds test: is a steady part stationary (no slow drift)?
 * :mod:`.se_time` — SE against averaging time and its extrapolation.
 * :mod:`.block_jackknife` — the delete-one-block jackknife.
 
@@ -33,18 +34,21 @@ from .se_time import (
     se_table_result,
     se_vs_time,
 )
+from .stationarity import DRIFT_Z, Stationarity, stationarity
 from .steady import SteadyStart, Trend, steady_state_start, trend
 
 __all__ = [
     "DEFAULT_ALPHA",
     "DEFAULT_FRACTIONS",
     "DEFAULT_MIN_BLOCKS",
+    "DRIFT_Z",
     "FIT_MIN_BLOCKS",
     "FIT_TAUS",
     "SECOND_MODE_PENALTY",
     "BlockingArrays",
     "BlockingResult",
     "SEvsTime",
+    "Stationarity",
     "SteadyStart",
     "Trend",
     "block_means",
@@ -59,6 +63,7 @@ __all__ = [
     "ratio_se",
     "se_table_result",
     "se_vs_time",
+    "stationarity",
     "steady_state_start",
     "trend",
 ]

@@ -1,11 +1,18 @@
 """The cell campaign (reproduce_002, cross_scene, seed_coverage run it): a *point* is one
 cell run, (mu_s, N, p_ext, tau/p, seed), from the compacted start
-(:class:`granflow.scenes.cell.ShearCell`), run in stints until its steady part spans a shear
-strain of ``min_strain`` and the blocking SEs of mu1 and phi are within ``se_target`` of their
-means, that of I within 3x (SE_TARGETS), or its budget of shear (``max_shear``) is spent, or it
-arrested over ARREST_STINTS stints, or it ran away. Times (stints, budgets) are in contact
-times t_c, the cell's unit: a stint of ``stint`` t_c is ``round(stint / f)`` steps at the
-material's dt = f t_c.
+(:class:`granflow.scenes.cell.ShearCell`), run in stints until it is done or its budget of
+shear (``max_shear``) is spent, or it arrested over ARREST_STINTS stints, or it ran away.
+
+The stop rule (:func:`converged`), in this order: the run is flowing and stationary (the
+thirds test of :func:`granflow.analysis.rheology.classify_run`: a drifting run goes on); its
+steady part spans ``min_taus`` integrated correlation times of the slowest of I, phi, mu1, mu2
+(MIN_LENGTH_COLUMNS) and a shear strain of ``min_strain``; only then are the SE targets
+consulted (mu1 and phi within ``se_target`` of their means, I within 3x, SE_TARGETS). The
+minimum length keeps a run from stopping because its SE estimate happened to dip (optional
+stopping biases every SE small), and gives each SE at least min_taus / 2 blocks of 2 tau.
+
+Times (stints, budgets) are in contact times t_c, the cell's unit: a stint of ``stint`` t_c is
+``round(stint / f)`` steps at the material's dt = f t_c.
 
 Its row: the point, its state, steps, wall seconds, and mean / SE / correlation time of every
 observable; the SE of I, phi, mu1 over the first quarter, half and all of its steady part go
@@ -57,6 +64,12 @@ class Point:
 #: relative SE targets, as multiples of the plan's ``se_target``: mu1 and phi (the issue's
 #: 1 %), and I (the fits' abscissa, whose SE is ~10x phi's: 3 %)
 SE_TARGETS = {"mu1": 1.0, "phi": 1.0, "I": 3.0}
+#: the reported quantities whose slowest correlation time sets a run's minimum length (phi's,
+#: the barostat's volume mode, is 100-900 t_c at N = 2000, I's ~10-900, mu1's ~3)
+MIN_LENGTH_COLUMNS = ("I", "phi", "mu1", "mu2")
+#: fewest blocks of 2 tau a quantity's SE may rest on; with fewer its SE is NaN (not enough
+#: data) rather than a small number
+MIN_SE_BLOCKS = 10.0
 
 
 @dataclass(frozen=True)
@@ -75,6 +88,9 @@ class Plan:
     #: shear strain (2 |D| T, engineering) the steady part must span: an SE target is easily
     #: met by a short stretch of a slow flow (p = 1e-5 met it after 0.3 of strain, dilating)
     min_strain: float = 2.0
+    #: integrated correlation times of the slowest of MIN_LENGTH_COLUMNS the steady part must
+    #: span before the SE targets are consulted (10 blocks of 2 tau)
+    min_taus: float = 20.0
     #: the cell's material (the point's mu_s overrides its friction; 002's by default, the
     #: channel's in granflow.studies.cross_scene); its dt rule must be a fraction of t_c
     material: Material = MATERIAL_002
@@ -134,22 +150,40 @@ def _analyse(s: pl.DataFrame, observables: Iterable[str] = OBSERVABLES) -> dict[
 
     cols = [c for c in observables if c in s.columns]
     res = rh.analyse_run(s, columns=cols)
+    t_avg = float(s["t"][-1] - res.state.t_start)
     out: dict[str, Any] = {"state": res.state.state, "t_start": res.state.t_start,
-                           "T_avg": float(s["t"][-1] - res.state.t_start)}
+                           "T_avg": t_avg, "drift_z": res.state.drift_z,
+                           "drift_quantity": res.state.drift_quantity}
     for r in res.stats.iter_rows(named=True):
-        o = r["observable"]
-        out[o], out[f"{o}_se"], out[f"{o}_tau"] = r["mean"], r["se"], r["tau"]
+        o, tau = r["observable"], r["tau"]
+        # (an SE from fewer than MIN_SE_BLOCKS blocks of 2 tau is not reported)
+        enough = math.isfinite(tau) and t_avg >= 2.0 * MIN_SE_BLOCKS * tau
+        out[o], out[f"{o}_tau"] = r["mean"], tau
+        out[f"{o}_se"] = r["se"] if enough else math.nan
+    taus = [out.get(f"{c}_tau", math.nan) for c in MIN_LENGTH_COLUMNS if f"{c}_tau" in out]
+    out["tau_max"] = max(taus) if taus and all(map(math.isfinite, taus)) else math.nan
     return out
 
 
 #: stints of shear before a point may stop as arrested
 ARREST_STINTS = 4
 
-def _converged(row: Mapping[str, Any], plan: Plan) -> bool:
-    return (row["state"] == "flowing"
-            and 2.0 * row.get("shear_rate", 0.0) * row.get("T_avg", 0.0) >= plan.min_strain
-            and all(math.isfinite(row.get(f"{k}_se", math.nan))
-                    and row[f"{k}_se"] <= t * abs(row[k]) for k, t in plan.targets().items()))
+def long_enough(row: Mapping[str, Any], plan: Plan) -> bool:
+    """Whether a flowing, stationary run's steady part spans ``plan.min_taus`` correlation
+    times of its slowest reported quantity and ``plan.min_strain`` of shear: the minimum
+    length before any SE target is consulted."""
+    t_avg = row.get("T_avg", 0.0)
+    tau = row.get("tau_max", math.nan)
+    return (row["state"] == "flowing" and math.isfinite(tau)
+            and t_avg >= plan.min_taus * tau
+            and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
+
+
+def converged(row: Mapping[str, Any], plan: Plan) -> bool:
+    """The stop rule (module docstring): :func:`long_enough`, then the SE targets."""
+    return long_enough(row, plan) and all(
+        math.isfinite(row.get(f"{k}_se", math.nan)) and row[f"{k}_se"] <= t * abs(row[k])
+        for k, t in plan.targets().items())
 
 
 def _se_rows(point: Point, s: pl.DataFrame, t_start: float) -> list[dict[str, Any]]:
@@ -177,7 +211,7 @@ def point_row(point: Point, plan: Plan, series: pa.Table, shear0: float) -> dict
     row: dict[str, Any] = {**asdict(point), "state": "short", "converged": False}
     if s.height >= 200:
         row.update(_analyse(s, plan.observables))
-        row["converged"] = _converged(row, plan)
+        row["converged"] = converged(row, plan)
     row["se_rows"] = (_se_rows(point, s, float(row["t_start"])) if row["state"] == "flowing"
                       else [])
     return row

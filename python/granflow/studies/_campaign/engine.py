@@ -28,17 +28,26 @@ import pyarrow as pa
 from granflow.errors import DilationError, GranflowError
 
 
-def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False) -> None:
+def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False,
+               point: type | None = None) -> None:
     """Write ``rows`` as the Parquet table ``f`` (atomically), after its rows if ``append``;
-    columns missing from some rows are null there. Nothing is written for no rows."""
+    columns missing from some rows are null there. Nothing is written for no rows. ``point``:
+    the point's dataclass, whose field names go to the file's metadata (the coverage audit,
+    :mod:`granflow.analysis.coverage`, groups the replicas by them)."""
     from granflow import io
+    from granflow.analysis.coverage import POINT_FIELDS_KEY
 
     if not rows:
         return
     new = pl.from_dicts(list(rows), infer_schema_length=None)
     if append and f.exists():
         new = pl.concat([pl.read_parquet(f), new], how="diagonal_relaxed")
-    io.write_parquet(new.to_arrow(), f)
+    tab = new.to_arrow()
+    if point is not None and dataclasses.is_dataclass(point):
+        names = json.dumps([x.name for x in dataclasses.fields(point)]).encode()
+        tab = tab.replace_schema_metadata({**(tab.schema.metadata or {}),
+                                           POINT_FIELDS_KEY: names})
+    io.write_parquet(tab, f)
 
 
 def point_of(cls: type, row: Mapping[str, Any]) -> Any:
@@ -208,7 +217,7 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
         for k in study.tables:
             extra[k] += row.pop(k)
         keep.append(row)
-    write_rows(outp / "points.parquet", keep)
+    write_rows(outp / "points.parquet", keep, point=cls)
     for k, stem in study.tables.items():
         write_rows(outp / f"{stem}.parquet", extra[k])
     return dropped
@@ -247,7 +256,7 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
     args = [(study, p, plan, str(outp / "work")) for p in todo]
     for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler):
         extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
-        write_rows(outp / "points.parquet", [row], append=True)
+        write_rows(outp / "points.parquet", [row], append=True, point=cls)
         for stem, rows in extras.items():
             write_rows(outp / f"{stem}.parquet", rows, append=True)
         log(f"  {point_of(cls, row).key}: {describe(row)}")
