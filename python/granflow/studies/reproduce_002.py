@@ -100,7 +100,8 @@ def quick_plan() -> Plan:
     pts = tuple(Point(0.3, r, seed, N=500) for r in (0.45, 0.5, 0.55, 0.6)
                 for seed in range(1, REPLICAS + 1))
     # (stints of 25,000 steps, at most 200,000)
-    return Plan("quick", pts, se_target=0.02, max_shear={500: 4_000.0}, stint=500.0)
+    return Plan("quick", pts, se_target=0.02, max_shear={500: 4_000.0}, stint=500.0,
+                min_length=1_000.0)
 
 
 def main(argv: Iterable[str] | None = None) -> None:

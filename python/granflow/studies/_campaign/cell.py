@@ -5,8 +5,8 @@ shear (``max_shear``) is spent, or it arrested over ARREST_STINTS stints, or it 
 
 The stop rule (:func:`converged`), in this order: the run is flowing and stationary (the
 thirds test of :func:`granflow.analysis.rheology.classify_run`: a drifting run goes on); its
-steady part spans ``min_taus`` integrated correlation times of the slowest of I, phi, mu1, mu2
-(MIN_LENGTH_COLUMNS) and a shear strain of ``min_strain``; only then are the SE targets
+steady part spans ``min_length`` t_c, ``min_taus`` integrated correlation times of the slowest
+of I, phi, mu1, mu2 (MIN_LENGTH_COLUMNS) and a shear strain of ``min_strain``; only then are the SE targets
 consulted (mu1 and phi within ``se_target`` of their means, I within 3x, SE_TARGETS). The
 minimum length keeps a run from stopping because its SE estimate happened to dip (optional
 stopping biases every SE small), and gives each SE at least min_taus / 2 blocks of 2 tau.
@@ -91,6 +91,10 @@ class Plan:
     #: integrated correlation times of the slowest of MIN_LENGTH_COLUMNS the steady part must
     #: span before the SE targets are consulted (10 blocks of 2 tau)
     min_taus: float = 20.0
+    #: t_c the steady part must span whatever its correlation times: a short run cannot see a
+    #: mode slower than itself and estimates tau small (phi's tau from 3000 t_c of mu_s = 0,
+    #: tau/p = 0.4: 60 t_c; from 20,000 t_c: 570), so min_taus alone stopped it at 1500 t_c
+    min_length: float = 10_000.0
     #: the cell's material (the point's mu_s overrides its friction; 002's by default, the
     #: channel's in granflow.studies.cross_scene); its dt rule must be a fraction of t_c
     material: Material = MATERIAL_002
@@ -169,13 +173,13 @@ def _analyse(s: pl.DataFrame, observables: Iterable[str] = OBSERVABLES) -> dict[
 ARREST_STINTS = 4
 
 def long_enough(row: Mapping[str, Any], plan: Plan) -> bool:
-    """Whether a flowing, stationary run's steady part spans ``plan.min_taus`` correlation
-    times of its slowest reported quantity and ``plan.min_strain`` of shear: the minimum
-    length before any SE target is consulted."""
+    """Whether a flowing, stationary run's steady part spans ``plan.min_length`` contact
+    times, ``plan.min_taus`` correlation times of its slowest reported quantity and
+    ``plan.min_strain`` of shear: the minimum length before any SE target is consulted."""
     t_avg = row.get("T_avg", 0.0)
     tau = row.get("tau_max", math.nan)
     return (row["state"] == "flowing" and math.isfinite(tau)
-            and t_avg >= plan.min_taus * tau
+            and t_avg >= max(plan.min_length, plan.min_taus * tau)
             and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
 
 
