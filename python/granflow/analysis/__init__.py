@@ -3,7 +3,11 @@
 * :mod:`.tables` — column access for any table type (pyarrow, polars, mappings), ``to_polars``.
 * :mod:`.estimate` — :class:`Estimate`, a value with its standard error (the one such type).
 * :mod:`.stats` — Flyvbjerg-Petersen blocking, means and ratios with SEs, trend test,
-  steady-state detection, SE against run time, jackknife over blocks.
+  steady-state detection, the stationarity (thirds) test, SE against run time, jackknife over
+  blocks.
+* :mod:`.replicas` — a campaign point's value from its replicas (seeds): mean, within and
+  between SEs.
+* :mod:`.coverage` — the coverage audit: do the runs' SEs hold across seeds? (a command).
 * :mod:`.laws` — the forms of the flow laws mu(I), phi(I) (fits and continuum models).
 * :mod:`.binned` — binned profiles: window x bin matrices, whole-profile SEs.
 * :mod:`.channel_profiles` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran
@@ -17,7 +21,19 @@
 Flow states are :class:`granflow.states.FlowState` members.
 """
 
-from . import binned, channel, channel_profiles, estimate, laws, plots, rheology, stats, tables
+from . import (
+    binned,
+    channel,
+    channel_profiles,
+    coverage,
+    estimate,
+    laws,
+    plots,
+    replicas,
+    rheology,
+    stats,
+    tables,
+)
 from .binned import ProfileErrors, profile_se, profile_se_vs_time
 from .channel import (
     Zones,
@@ -32,6 +48,7 @@ from .channel import (
     zones,
 )
 from .channel_profiles import ChannelProfiles, ChannelState, flow_state, profiles
+from .coverage import pair_z, steady_rows
 from .estimate import Estimate
 from .plots import (
     plot_cell_rheology,
@@ -42,6 +59,7 @@ from .plots import (
     plot_se_vs_time,
     plot_work_precision,
 )
+from .replicas import replica_mean
 from .rheology import (
     CellState,
     FitResult,
@@ -64,12 +82,14 @@ from .rheology import (
 from .stats import (
     BlockingResult,
     SEvsTime,
+    Stationarity,
     SteadyStart,
     blocking,
     blocking_many,
     mean_se,
     ratio_se,
     se_vs_time,
+    stationarity,
     steady_state_start,
 )
 from .tables import as_columns, to_polars
@@ -78,9 +98,11 @@ __all__ = [
     "binned",
     "channel",
     "channel_profiles",
+    "coverage",
     "estimate",
     "laws",
     "plots",
+    "replicas",
     "rheology",
     "stats",
     "tables",
@@ -89,6 +111,7 @@ __all__ = [
     "Estimate",
     "ProfileErrors",
     "SEvsTime",
+    "Stationarity",
     "SteadyStart",
     "as_columns",
     "blocking",
@@ -98,8 +121,13 @@ __all__ = [
     "profile_se_vs_time",
     "ratio_se",
     "se_vs_time",
+    "stationarity",
     "steady_state_start",
     "to_polars",
+    # replicas and their coverage
+    "pair_z",
+    "replica_mean",
+    "steady_rows",
     # channel
     "ChannelProfiles",
     "ChannelState",

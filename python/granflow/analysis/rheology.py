@@ -85,6 +85,21 @@ TEXT_VALUES: dict[float, dict[str, float]] = {
         "a4": 0.92,
     },
 }
+#: the unit of the last digit 002 prints each value with: Table 1's A's three decimals, the
+#: text's constants two (alpha_3 "~0.5": one). A value printed as 0.63 is known to +-0.005,
+#: and a comparison must allow that (:func:`printed_unit`).
+PRINTED_UNIT: dict[str, float] = {"A1": 1e-3, "A2": 1e-3, "A3": 1e-3, "A4": 1e-3, "a3": 0.1,
+                                  **{k: 1e-2 for k in ("mu1_0", "a1", "mu2_0", "a2", "mu3_0",
+                                                       "phi_0", "a4")}}
+
+
+def printed_unit(name: str) -> float:
+    """The unit of the last digit paper 002 prints parameter ``name`` with (PRINTED_UNIT)."""
+    if name not in PRINTED_UNIT:
+        raise KeyError(f"no printed precision for {name!r}: allowed {sorted(PRINTED_UNIT)}")
+    return PRINTED_UNIT[name]
+
+
 DEFAULT_TABLE1_PATH = (
     Path(os.environ.get("GRANFLOW_REFERENCE_DIR", "/work/shared/reference"))
     / "srivastava_table1.csv"

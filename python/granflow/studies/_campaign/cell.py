@@ -6,10 +6,11 @@ shear (``max_shear``) is spent, or it arrested over ARREST_STINTS stints, or it 
 The stop rule (:func:`converged`), in this order: the run is flowing and stationary (the
 thirds test of :func:`granflow.analysis.rheology.classify_run`: a drifting run goes on); its
 steady part spans ``min_length`` t_c, ``min_taus`` integrated correlation times of the slowest
-of I, phi, mu1, mu2 (MIN_LENGTH_COLUMNS) and a shear strain of ``min_strain``; only then are the SE targets
-consulted (mu1 and phi within ``se_target`` of their means, I within 3x, SE_TARGETS). The
-minimum length keeps a run from stopping because its SE estimate happened to dip (optional
-stopping biases every SE small), and gives each SE at least min_taus / 2 blocks of 2 tau.
+of I, phi, mu1, mu2 (MIN_LENGTH_COLUMNS) and a shear strain of ``min_strain``; only then are
+the SE targets consulted (mu1 and phi within ``se_target`` of their means, I within 3x,
+SE_TARGETS). The minimum length keeps a run from stopping because its SE estimate happened to
+dip (optional stopping biases every SE small), and gives each SE at least min_taus / 2 blocks
+of 2 tau.
 
 Times (stints, budgets) are in contact times t_c, the cell's unit: a stint of ``stint`` t_c is
 ``round(stint / f)`` steps at the material's dt = f t_c.

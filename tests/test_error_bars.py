@@ -1,0 +1,175 @@
+"""Error bars that hold across replicas (issue 34): the stationarity test, the replica mean and
+its SE, the coverage audit, and the campaign's stop rule, on synthetic data with known
+answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import polars as pl
+import pytest
+from granflow.analysis import coverage as cov
+from granflow.analysis import rheology as rh
+from granflow.analysis.replicas import replica_mean, small_sample_factor
+from granflow.analysis.stats import DRIFT_Z, stationarity
+from granflow.states import FlowState
+from granflow.studies._campaign.cell import MIN_SE_BLOCKS, Plan, converged, long_enough
+from scipy.signal import lfilter
+
+
+def ar1(n: int, a: float, rng: np.random.Generator) -> np.ndarray:
+    """A stationary AR(1) series of unit variance (started in its stationary distribution)."""
+    e = rng.normal(size=n)
+    e[0] /= math.sqrt(1 - a * a)
+    return math.sqrt(1 - a * a) * lfilter([1.0], [1.0, -a], e)
+
+
+# --------------------------------------------------------------------------------------------
+# stationarity
+# --------------------------------------------------------------------------------------------
+def test_stationarity_catches_a_slow_drift_and_passes_a_stationary_ar1():
+    n, a = 6000, 0.95  # tau ~ 20 samples: 300 correlation times in all
+    flagged, zs = 0, []
+    for seed in range(20):
+        x = ar1(n, a, np.random.default_rng(seed))
+        st = stationarity({"x": x})
+        assert st.tested
+        flagged += not st.stationary
+        zs.append(st.z["x"])
+    assert flagged <= 2  # |z| > 3 is a 0.3 % event for honest thirds' SEs
+    assert 0.6 < float(np.sqrt(np.mean(np.square(zs)))) < 1.5
+    # the same noise with a slow linear drift of 2 standard deviations across the run: the
+    # drift is 10x the SE of the whole run's mean, which a blocking SE alone would not see
+    for seed in range(5):
+        x = ar1(n, a, np.random.default_rng(100 + seed)) + np.linspace(0.0, 2.0, n)
+        st = stationarity({"flat": ar1(n, a, np.random.default_rng(seed)), "drift": x})
+        assert not st.stationary and st.worst == "drift" and st.max_abs_z > DRIFT_Z
+
+
+def test_stationarity_of_a_short_series_is_not_tested():
+    st = stationarity({"x": np.arange(20.0)})
+    assert not st.tested and not st.stationary and math.isnan(st.max_abs_z)
+    with pytest.raises(ValueError):
+        stationarity({})
+
+
+def test_a_flowing_cell_run_that_drifts_is_drifting():
+    rng = np.random.default_rng(4)
+    n = 4000
+    t = np.arange(n, dtype=float)
+    base = {"t": t, "step": np.arange(n), "shear_rate": 0.1 * (1 + 0.05 * ar1(n, 0.8, rng)),
+            "L_xy": 0.1 * (1 + 0.05 * ar1(n, 0.8, rng)), "mu1": 0.4 + 0.01 * ar1(n, 0.8, rng),
+            "mu2": 0.1 + 0.01 * ar1(n, 0.8, rng), "I": 0.3 + 0.01 * ar1(n, 0.8, rng),
+            "p": 1e-4 * (1 + 0.01 * ar1(n, 0.8, rng))}
+    steady = {**base, "phi": 0.5 + 0.002 * ar1(n, 0.8, rng)}
+    st = rh.classify_run(steady, start=0)
+    assert st.state is FlowState.FLOWING and st.drift_z < DRIFT_Z
+    # phi creeps down by 0.01 (5 of its standard deviations) over the run: a slow dilation
+    drifting = {**base, "phi": steady["phi"] - np.linspace(0.0, 0.01, n)}
+    st = rh.classify_run(drifting, start=0)
+    assert st.state is FlowState.DRIFTING and st.drift_quantity == "phi"
+    assert not st.averaged and not st.state.is_steady
+
+
+# --------------------------------------------------------------------------------------------
+# replicas
+# --------------------------------------------------------------------------------------------
+def test_replica_se_is_right_for_replicas_of_known_variance():
+    rng = np.random.default_rng(7)
+    sigma, k, groups = 0.3, 3, 4000
+    x = rng.normal(1.0, sigma, size=(groups, k))
+    d = pl.DataFrame({"point": np.repeat(np.arange(groups), k), "x": x.ravel(),
+                      "x_se": np.full(groups * k, sigma)})
+    r = replica_mean(d, ["point"], ["x"])
+    assert r.height == groups and (r["replicas"] == k).all()
+    # the within SE: sigma / sqrt(k) exactly (honest run SEs)
+    assert np.allclose(r["x_se_within"].to_numpy(), sigma / math.sqrt(k))
+    # the between SE with the small-sample factor is a 68.3 % interval (Student, k - 1 dof)
+    hit = np.abs(r["x"].to_numpy() - 1.0) <= r["x_se_between"].to_numpy()
+    assert abs(hit.mean() - 0.6827) < 0.025
+    assert small_sample_factor(3) == pytest.approx(1.3213, abs=1e-3)
+    # the point's SE is the larger; a replica without an SE leaves the point without one
+    assert (r["x_se"] >= r["x_se_within"]).all() and (r["x_se"] >= r["x_se_between"]).all()
+    d2 = pl.DataFrame({"point": [0, 0, 0], "x": [1.0, 2.0, 3.0], "x_se": [0.1, math.nan, 0.1]})
+    assert math.isnan(replica_mean(d2, ["point"], ["x"])["x_se"][0])
+
+
+def test_replica_se_shows_run_errors_that_are_too_small():
+    rng = np.random.default_rng(8)
+    x = rng.normal(0.0, 1.0, size=(2000, 3))
+    d = pl.DataFrame({"point": np.repeat(np.arange(2000), 3), "x": x.ravel(),
+                      "x_se": np.full(6000, 0.25)})  # 4x too small
+    r = replica_mean(d, ["point"], ["x"])
+    # (the median between SE ~ 0.83 sigma x 1.32 / sqrt 3 ~ 0.63 against within 0.144)
+    assert float(r["x_se"].median()) > 3 * float(r["x_se_within"].median())
+
+
+# --------------------------------------------------------------------------------------------
+# coverage
+# --------------------------------------------------------------------------------------------
+def _replicas(groups: int, k: int, true_sd: float, reported: float, seed: int) -> pl.DataFrame:
+    rng = np.random.default_rng(seed)
+    return pl.DataFrame({
+        "mu_s": np.repeat(np.arange(groups) * 0.1, k), "seed": np.tile(np.arange(1, k + 1), groups),
+        "state": ["flowing"] * (groups * k), "I": rng.normal(0.1, true_sd, groups * k),
+        "I_se": np.full(groups * k, reported)})
+
+
+def test_coverage_is_one_for_honest_errors_and_finds_small_ones():
+    honest = cov.coverage(_replicas(200, 3, 0.01, 0.01, 1), ["mu_s"], ["I"]).row(0, named=True)
+    assert honest["pairs"] == 600 and honest["dof"] == 400 and honest["points"] == 200
+    assert honest["rms_z_lo"] < 1.0 < honest["rms_z_hi"]
+    small = cov.coverage(_replicas(200, 3, 0.03, 0.01, 2), ["mu_s"], ["I"]).row(0, named=True)
+    assert small["rms_z_lo"] > 2.5
+    # few pairs: a wide interval
+    few = cov.coverage(_replicas(3, 2, 0.01, 0.01, 3), ["mu_s"], ["I"]).row(0, named=True)
+    assert few["dof"] == 3 and few["rms_z_hi"] / few["rms_z_lo"] > 3
+
+
+def test_coverage_counts_only_steady_replicas_and_has_a_command(tmp_path, capsys):
+    d = _replicas(10, 3, 0.01, 0.01, 4).with_columns(
+        pl.when(pl.col("seed") == 3).then(pl.lit("drifting")).otherwise(pl.col("state"))
+        .alias("state"))
+    steady = cov.steady_rows(d)
+    assert steady.height == 20 and set(steady["state"].to_list()) == {"flowing"}
+    one = cov.coverage(steady, ["mu_s"], ["I"]).row(0, named=True)
+    assert one["pairs"] == 10 and one["dof"] == 10
+    d.write_parquet(tmp_path / "points.parquet")
+    tab = cov.main([str(tmp_path), "--by", "mu_s", "--observables", "I"])
+    assert tab["pairs"][0] == 10 and "rms_z" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------------------------
+# the stop rule
+# --------------------------------------------------------------------------------------------
+def test_the_stop_rule_refuses_to_stop_before_its_minimum_length():
+    plan = Plan("t", (), min_length=1000.0, min_taus=20.0, min_strain=2.0)
+    row = {"state": "flowing", "T_avg": 900.0, "tau_max": 10.0, "shear_rate": 0.1,
+           "mu1": 0.4, "mu1_se": 1e-6, "phi": 0.5, "phi_se": 1e-6, "I": 0.1, "I_se": 1e-6}
+    assert not long_enough(row, plan) and not converged(row, plan)  # SEs tiny, too short
+    assert converged({**row, "T_avg": 1000.0}, plan)
+    # the slowest quantity's correlation time, not the fixed floor, sets the length
+    assert not converged({**row, "T_avg": 1500.0, "tau_max": 100.0}, plan)
+    assert converged({**row, "T_avg": 2000.0, "tau_max": 100.0}, plan)
+    # ... and only then the SE targets; a drifting run never stops on them
+    assert not converged({**row, "T_avg": 2000.0, "mu1_se": 0.1}, plan)
+    assert not converged({**row, "T_avg": 5000.0, "state": "drifting"}, plan)
+    assert not converged({**row, "T_avg": 5000.0, "tau_max": math.nan}, plan)
+
+
+def test_no_se_from_fewer_than_ten_blocks():
+    from granflow.studies._campaign.cell import _analyse
+
+    rng = np.random.default_rng(5)
+    n = 3000
+    t = np.arange(n, dtype=float)
+    s = pl.DataFrame({"t": t, "step": np.arange(n), "L_xy": 0.1 + 0.001 * ar1(n, 0.5, rng),
+                      "shear_rate": 0.1 + 0.001 * ar1(n, 0.5, rng),
+                      "mu1": 0.4 + 0.01 * ar1(n, 0.5, rng),
+                      # a quantity correlated over ~300 samples: ~5 blocks of 2 tau in 3000
+                      "phi": 0.5 + 0.002 * ar1(n, math.exp(-1 / 300), rng)})
+    row = _analyse(s, ("mu1", "phi"))
+    assert math.isfinite(row["mu1_se"]) and row["T_avg"] >= 2 * MIN_SE_BLOCKS * row["mu1_tau"]
+    assert row["T_avg"] < 2 * MIN_SE_BLOCKS * row["phi_tau"] and math.isnan(row["phi_se"])
+    assert row["tau_max"] == pytest.approx(row["phi_tau"])
