@@ -11,7 +11,9 @@ degrees of freedom). Few pairs make it wide.
            [--observables I,phi,mu1,mu2]
 
 reads ``points.parquet`` of a campaign dataset (the point's fields from its metadata, written
-by the campaign engine, or ``--by``) and prints the table.
+by the campaign engine, or ``--by``) and prints the table. With many seeds of one point
+(benchmarks/seed_coverage.py, granflow.studies.seed_coverage) the same question is
+:func:`seed_spread`: the seeds' spread over their root-mean-square SE.
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ from granflow.states import FlowState
 
 from .tables import TableLike, to_polars
 
-__all__ = ["POINT_FIELDS_KEY", "coverage", "main", "pair_z", "point_fields", "steady_rows"]
+__all__ = ["POINT_FIELDS_KEY", "coverage", "main", "pair_z", "point_fields", "seed_spread",
+           "steady_rows"]
 
 #: the Parquet metadata key under which the campaign engine lists a point's fields
 POINT_FIELDS_KEY = b"granflow.point"
@@ -107,6 +110,29 @@ def coverage(points: TableLike, by: Sequence[str],
                      if used.height else 0, "pairs": int(zz.size), "dof": dof,
                      "rms_z": rms, "rms_z_lo": lo, "rms_z_hi": hi, "max_abs_z": mx,
                      "worst": worst})
+    return pl.DataFrame(rows)
+
+
+def seed_spread(runs: TableLike, observables: Sequence[str] = DEFAULT_OBSERVABLES
+                ) -> pl.DataFrame:
+    """The many-seed form of the audit: ``runs`` are seeds of one point (rows with ``X`` and
+    ``X_se``; pass the steady ones, :func:`steady_rows`). Per observable: ``seeds``, ``mean``,
+    ``spread`` (standard deviation of the seeds' means), ``rms_se`` (root mean square of their
+    SEs), ``ratio`` = spread / rms_se (1 for honest SEs) and its 95 % band for K seeds,
+    1 +- 1.96 / sqrt(2 (K - 1)) (``band_lo``, ``band_hi``), with ``within`` it."""
+    d = to_polars(runs)
+    k = d.height
+    half = 1.96 / math.sqrt(2 * (k - 1)) if k > 1 else math.nan
+    rows = []
+    for o in observables:
+        x = d[o].cast(pl.Float64).to_numpy()
+        se = d[f"{o}_se"].cast(pl.Float64).to_numpy()
+        spread = float(x.std(ddof=1)) if k > 1 else math.nan
+        rms = float(np.sqrt(np.mean(se**2))) if k else math.nan
+        ratio = spread / rms if rms > 0 else math.nan
+        rows.append({"observable": o, "seeds": k, "mean": float(x.mean()) if k else math.nan,
+                     "spread": spread, "rms_se": rms, "ratio": ratio, "band_lo": 1 - half,
+                     "band_hi": 1 + half, "within": bool(1 - half <= ratio <= 1 + half)})
     return pl.DataFrame(rows)
 
 

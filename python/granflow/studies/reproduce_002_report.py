@@ -339,7 +339,8 @@ def plot_figures(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitRes
 
 
 def se_shrink(se: pl.DataFrame) -> pl.DataFrame:
-    """Per observable: median over points of SE(fraction)/SE(all) against sqrt(1/fraction)."""
+    """Per observable: median over points of SE(fraction)/SE(all) against sqrt(1/fraction),
+    over the points with both SEs (a fraction with too little data has none)."""
     rows = []
     full = se.filter(pl.col("fraction") == 1.0)
     key = ["mu_s", "N", "tau_ratio", "seed"]
@@ -347,8 +348,10 @@ def se_shrink(se: pl.DataFrame) -> pl.DataFrame:
         part = se.filter(pl.col("fraction") == f).join(full, on=key, suffix="_all")
         row: dict[str, Any] = {"fraction of the run": f, "expected (T^-1/2)": 1 / math.sqrt(f)}
         for col in ("I", "phi", "mu1"):
-            row[f"SE({col}) / SE(all)"] = float(
-                (part[f"{col}_se"] / part[f"{col}_se_all"]).median())  # type: ignore[arg-type]
+            r = (part[f"{col}_se"] / part[f"{col}_se_all"]).to_numpy()
+            r = r[np.isfinite(r)]  # (too little data for an SE: none)
+            row[f"SE({col}) / SE(all)"] = float(np.median(r)) if r.size else math.nan
+            row[f"points ({col})"] = int(r.size)
         rows.append(row)
     return pl.DataFrame(rows)
 

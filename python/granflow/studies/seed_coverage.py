@@ -23,6 +23,8 @@ from pathlib import Path
 
 import polars as pl
 
+from granflow.analysis.coverage import seed_spread, steady_rows
+
 from ._campaign import cli, md_table
 from ._campaign.cell import Plan, Point, reanalyse, run_campaign
 
@@ -51,22 +53,10 @@ def quick_plan() -> Plan:
 
 
 def coverage(points: pl.DataFrame, observables: Sequence[str] = SHOWN) -> pl.DataFrame:
-    """Per observable, over the flowing seeds of ``points`` (rows of the cell campaign):
-    ``seeds``, ``mean``, ``spread`` (standard deviation of the seeds' means), ``rms_se`` (root
-    mean square of their SEs), ``ratio`` = spread / rms_se, and the 95 % band of the ratio for
-    honest SEs (``band_lo``, ``band_hi``) with ``within`` it."""
-    flowing = points.filter(pl.col("state") == "flowing")
-    k = flowing.height
-    half = 1.96 / math.sqrt(2 * (k - 1)) if k > 1 else math.nan
-    rows = []
-    for o in observables:
-        spread = float(flowing[o].std())  # type: ignore[arg-type]
-        rms = math.sqrt(float((flowing[f"{o}_se"] ** 2).mean()))  # type: ignore[arg-type]
-        ratio = spread / rms
-        rows.append({"observable": o, "seeds": k, "mean": float(flowing[o].mean()),  # type: ignore[arg-type]
-                     "spread": spread, "rms_se": rms, "ratio": ratio, "band_lo": 1 - half,
-                     "band_hi": 1 + half, "within": 1 - half <= ratio <= 1 + half})
-    return pl.DataFrame(rows)
+    """Per observable, over the steady seeds of ``points`` (rows of the cell campaign):
+    :func:`granflow.analysis.coverage.seed_spread` (seeds, mean, spread, rms_se, ratio and
+    its 95 % band for honest SEs)."""
+    return seed_spread(steady_rows(points), observables)
 
 
 def verdict(cov: pl.DataFrame) -> tuple[float, bool]:

@@ -191,9 +191,12 @@ def converged(row: Mapping[str, Any], plan: Plan) -> bool:
         for k, t in plan.targets().items())
 
 
-def _se_rows(point: Point, s: pl.DataFrame, t_start: float) -> list[dict[str, Any]]:
+def _se_rows(point: Point, s: pl.DataFrame, t_start: float,
+             taus: Mapping[str, float]) -> list[dict[str, Any]]:
     """SE of I, phi, mu1 over the first fractions of the steady part (error against time;
-    stats.se_vs_time per observable, each row with its averaging time T)."""
+    stats.se_vs_time per observable, each row with its averaging time T); NaN where the
+    fraction spans fewer than MIN_SE_BLOCKS blocks of 2 tau, tau the whole run's (``taus``):
+    a prefix cannot see a mode slower than itself, and its own SE is too small."""
     from granflow.analysis.stats import se_vs_time
 
     t = s["t"].to_numpy()
@@ -201,10 +204,12 @@ def _se_rows(point: Point, s: pl.DataFrame, t_start: float) -> list[dict[str, An
     rows: dict[float, dict[str, Any]] = {}
     for col in SE_COLUMNS:
         tab = se_vs_time(t, s[col].to_numpy(), fractions=SE_FRACTIONS, start=start).table
+        tau = taus.get(col, math.nan)
         for r in tab.iter_rows(named=True):
             row = rows.setdefault(r["fraction"], {**asdict(point), "fraction": r["fraction"],
                                                   "T_avg": r["T"]})
-            row[f"{col}_se"] = r["se"]
+            enough = math.isfinite(tau) and r["T"] >= 2.0 * MIN_SE_BLOCKS * tau
+            row[f"{col}_se"] = r["se"] if enough else math.nan
     return list(rows.values())
 
 
@@ -217,8 +222,9 @@ def point_row(point: Point, plan: Plan, series: pa.Table, shear0: float) -> dict
     if s.height >= 200:
         row.update(_analyse(s, plan.observables))
         row["converged"] = converged(row, plan)
-    row["se_rows"] = (_se_rows(point, s, float(row["t_start"])) if row["state"] == "flowing"
-                      else [])
+    taus = {c: float(row.get(f"{c}_tau", math.nan)) for c in SE_COLUMNS}
+    row["se_rows"] = (_se_rows(point, s, float(row["t_start"]), taus)
+                      if row["state"] == "flowing" else [])
     return row
 
 

@@ -86,7 +86,8 @@ def plot_campaign_se(se: pl.DataFrame, path: Path, columns: Sequence[str],
         t = np.array([se["T_avg"].min(), se["T_avg"].max()], dtype=float)
         full = se.filter(pl.col("fraction") == 1.0)
         s = full[f"{col}_se"] / full[col] if relative else full[f"{col}_se"]
-        c = float(np.median(s.to_numpy() * np.sqrt(full["T_avg"].to_numpy())))
+        # (a point's SE may be NaN: too little data for one)
+        c = float(np.nanmedian(s.to_numpy() * np.sqrt(full["T_avg"].to_numpy())))
         ax.plot(t, c / np.sqrt(t), "k--", label="median SE ~ T^-1/2")
         if not labelled:
             ax.plot([], [], "-", color="0.6", label="one point (first 1/4, 1/2, all)")
