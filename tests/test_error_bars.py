@@ -145,17 +145,22 @@ def test_coverage_counts_only_steady_replicas_and_has_a_command(tmp_path, capsys
 # --------------------------------------------------------------------------------------------
 def test_the_stop_rule_refuses_to_stop_before_its_minimum_length():
     plan = Plan("t", (), min_length=1000.0, min_taus=20.0, min_strain=2.0)
-    row = {"state": "flowing", "T_avg": 900.0, "tau_max": 10.0, "shear_rate": 0.1,
-           "mu1": 0.4, "mu1_se": 1e-6, "phi": 0.5, "phi_se": 1e-6, "I": 0.1, "I_se": 1e-6}
-    assert not long_enough(row, plan) and not converged(row, plan)  # SEs tiny, too short
-    assert converged({**row, "T_avg": 1000.0}, plan)
+
+    def row(t_tc: float, **kw: object) -> dict[str, object]:
+        # (kernel time = 2 t_c: T_avg and tau_max in kernel time, the floor in t_c)
+        return {"state": "flowing", "T_avg": 2.0 * t_tc, "T_avg_tc": t_tc, "tau_max": 10.0,
+                "shear_rate": 0.1, "mu1": 0.4, "mu1_se": 1e-6, "phi": 0.5, "phi_se": 1e-6,
+                "I": 0.1, "I_se": 1e-6, **kw}
+
+    assert not long_enough(row(900.0), plan) and not converged(row(900.0), plan)  # too short
+    assert converged(row(1000.0), plan)
     # the slowest quantity's correlation time, not the fixed floor, sets the length
-    assert not converged({**row, "T_avg": 1500.0, "tau_max": 100.0}, plan)
-    assert converged({**row, "T_avg": 2000.0, "tau_max": 100.0}, plan)
+    assert not converged(row(1500.0, tau_max=200.0), plan)  # 3000 < 20 x 200
+    assert converged(row(2000.0, tau_max=200.0), plan)
     # ... and only then the SE targets; a drifting run never stops on them
-    assert not converged({**row, "T_avg": 2000.0, "mu1_se": 0.1}, plan)
-    assert not converged({**row, "T_avg": 5000.0, "state": "drifting"}, plan)
-    assert not converged({**row, "T_avg": 5000.0, "tau_max": math.nan}, plan)
+    assert not converged(row(2000.0, mu1_se=0.1), plan)
+    assert not converged(row(5000.0, state="drifting"), plan)
+    assert not converged(row(5000.0, tau_max=math.nan), plan)
 
 
 def test_no_se_from_fewer_than_ten_blocks():

@@ -222,8 +222,8 @@ def _curve_sd(law: str, grid: np.ndarray, params: Sequence[float],
 def curve_comparison(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
                      n: int = 2000) -> pl.DataFrame:
     """The headline comparison: per mu_s where 002 gives a law's constants and per law, our
-    fitted curve against the paper's over the common I range (that of our fitted points, which
-    002's runs span), on a log grid: the largest |ours - paper| over its error (our fit's
+    fitted curve against the paper's over the I range of our fitted points (ours is not
+    extrapolated), on a log grid: the largest |ours - paper| over its error (our fit's
     covariance, scaled as the table's errors, and the paper's constants' printed precision,
     a uniform half unit each, propagated through the curves), where it is, and the verdict."""
     rows = []
@@ -401,16 +401,19 @@ def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) ->
     short = points.filter((pl.col("state") == "flowing")
                           & ~pl.col("converged").fill_null(False))
     if short.height:
+        tc = ([(pl.col("T_avg_tc")).alias("T (t_c)"),
+               (pl.col("tau_max") * pl.col("T_avg_tc") / pl.col("T_avg")).alias("tau_max (t_c)")]
+              if "T_avg_tc" in short.columns else [pl.col("T_avg")])
         tab = short.select(
-            "mu_s", "tau_ratio", "seed", "shear_steps", "T_avg",
-            *(["tau_max"] if "tau_max" in short.columns else []),
+            "mu_s", "tau_ratio", "seed", "shear_steps", *tc,
             (pl.col("I_se") / pl.col("I")).alias("SE(I)/I"),
             (pl.col("phi_se") / pl.col("phi")).alias("SE(phi)/phi"),
             (pl.col("mu1_se") / pl.col("mu1")).alias("SE(mu1)/mu1"))
         lines += ["", f"{short.height} flowing runs stopped at the step cap before the stop "
                   "rule was met (they count with their SEs; '-': too little data for one):",
                   "", md_table(tab, {"SE(I)/I": ".3f", "SE(phi)/phi": ".4f",
-                                     "SE(mu1)/mu1": ".4f", "T_avg": ".0f", "tau_max": ".0f"})]
+                                     "SE(mu1)/mu1": ".4f", "T_avg": ".0f", "T (t_c)": ".0f",
+                                     "tau_max (t_c)": ".0f"})]
     lacking = pool.filter(~usable(pool))
     if lacking.height:
         lines += ["", f"{lacking.height} points lack an SE of a reported quantity (too little "

@@ -177,10 +177,10 @@ def long_enough(row: Mapping[str, Any], plan: Plan) -> bool:
     """Whether a flowing, stationary run's steady part spans ``plan.min_length`` contact
     times, ``plan.min_taus`` correlation times of its slowest reported quantity and
     ``plan.min_strain`` of shear: the minimum length before any SE target is consulted."""
-    t_avg = row.get("T_avg", 0.0)
+    t_avg = row.get("T_avg", 0.0)  # (kernel time, as tau_max; T_avg_tc in t_c)
     tau = row.get("tau_max", math.nan)
     return (row["state"] == "flowing" and math.isfinite(tau)
-            and t_avg >= max(plan.min_length, plan.min_taus * tau)
+            and row.get("T_avg_tc", 0.0) >= plan.min_length and t_avg >= plan.min_taus * tau
             and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
 
 
@@ -221,6 +221,11 @@ def point_row(point: Point, plan: Plan, series: pa.Table, shear0: float) -> dict
     row: dict[str, Any] = {**asdict(point), "state": "short", "converged": False}
     if s.height >= 200:
         row.update(_analyse(s, plan.observables))
+        # (the series' time is the kernel's; the plan's lengths are in t_c: dt per step over
+        # the plan's dt in t_c is t_c)
+        step, t = s["step"].to_numpy(), s["t"].to_numpy()
+        t_c = (t[-1] - t[0]) / float(step[-1] - step[0]) / plan.dt
+        row["T_avg_tc"] = row["T_avg"] / t_c
         row["converged"] = converged(row, plan)
     taus = {c: float(row.get(f"{c}_tau", math.nan)) for c in SE_COLUMNS}
     row["se_rows"] = (_se_rows(point, s, float(row["t_start"]), taus)
