@@ -178,3 +178,38 @@ def test_no_se_from_fewer_than_ten_blocks():
     assert math.isfinite(row["mu1_se"]) and row["T_avg"] >= 2 * MIN_SE_BLOCKS * row["mu1_tau"]
     assert row["T_avg"] < 2 * MIN_SE_BLOCKS * row["phi_tau"] and math.isnan(row["phi_se"])
     assert row["tau_max"] == pytest.approx(row["phi_tau"])
+
+
+# --------------------------------------------------------------------------------------------
+# the 002 report's comparisons
+# --------------------------------------------------------------------------------------------
+def _paper_pool(shift: float) -> pl.DataFrame:
+    """Replica means at mu_s = 0.3 on 002's curves (mu1 shifted by ``shift``), SE 0.002."""
+    inum = np.geomspace(0.01, 0.4, 8)
+    row: dict[str, object] = {"mu_s": 0.3, "N": 2000, "p_ext": 1e-4,
+                              "tau_ratio": np.linspace(0.4, 0.6, 8), "I": inum,
+                              "I_se": 1e-4 * inum}
+    for law in ("mu1", "mu2", "mu3", "phi"):
+        y = rh.reference_curve(law, inum, 0.3, offset=0.01 if law == "mu3" else None)
+        row[law] = y + (shift if law == "mu1" else 0.0)
+        row[f"{law}_se"] = np.full(8, 0.002 if law != "phi" else 0.0005)
+    return pl.DataFrame(row)
+
+
+def test_the_curve_comparison_and_the_printed_precision():
+    from granflow.studies import reproduce_002_report as rep
+
+    same = _paper_pool(0.0)
+    cmp = rep.curve_comparison(same, rep.fits_by_mu(same))
+    assert set(cmp["law"].to_list()) == {"(4.2) mu1", "(4.4) mu2", "(4.7) phi"}
+    assert (cmp["verdict"] == "agrees").all() and cmp["largest |ours - paper|"].max() < 0.002
+    off = _paper_pool(0.03)
+    cmp = rep.curve_comparison(off, rep.fits_by_mu(off)).filter(pl.col("law") == "(4.2) mu1")
+    assert cmp["verdict"][0].startswith("differs")
+    assert cmp["largest |ours - paper|"][0] == pytest.approx(0.03, abs=0.003)
+    # phi_0 = 0.63 as printed stands for 0.625-0.635: 0.634 +- 0.001 agrees with it
+    assert rh.printed_unit("phi_0") == 0.01 and rh.printed_unit("A1") == 0.001
+    rows = rep.table_rows(rep.fits_by_mu(same))
+    assert rows.filter(pl.col("parameter") == "phi_0")["verdict"][0] == "agrees"
+    with pytest.raises(KeyError):
+        rh.printed_unit("nope")
