@@ -449,26 +449,6 @@ def collect_runs(
 
 
 @quiet
-def seed_coverage(runs: Sequence[TableLike], columns: Sequence[str] = ("I", "phi", "mu2", "mu1"),
-                  **classify_kwargs: Any) -> pl.DataFrame:
-    """Are the SEs honest? ``runs``: the ``series`` of one point run with different seeds. One
-    row per observable: ``seeds``, the mean over seeds, ``spread`` (standard deviation of the
-    seeds' steady means), ``rms_se`` (root mean square of their reported SEs), their ratio
-    ``spread_over_se`` (1 within ~1/sqrt(2 (seeds - 1)) for honest SEs) and ``all_flowing``."""
-    rows = []
-    for s in runs:
-        res = analyse_run(s, columns=list(columns), **classify_kwargs)
-        for r in res.stats.iter_rows(named=True):
-            rows.append({"state": res.state.state.value, **r})
-    d = pl.DataFrame(rows)
-    return d.group_by("observable", maintain_order=True).agg(
-        pl.len().alias("seeds"), pl.col("mean").mean().alias("mean_over_seeds"),
-        pl.col("mean").std().alias("spread"), (pl.col("se") ** 2).mean().sqrt().alias("rms_se"),
-        (pl.col("state") == FlowState.FLOWING).all().alias("all_flowing"),
-    ).with_columns((pl.col("spread") / pl.col("rms_se")).alias("spread_over_se"))
-
-
-@quiet
 def pool_realizations(df: TableLike, by: Sequence[str]) -> pl.DataFrame:
     """Combine runs with equal ``by`` values (e.g. realizations at the same applied stresses)
     by inverse-variance weighting: ``X = sum(X/se^2)/sum(1/se^2)``, ``X_se = sum(1/se^2)^-1/2``;

@@ -51,6 +51,8 @@ MORE_RATIOS: dict[float, tuple[float, ...]] = {
 }
 
 
+#: the frictions for which 002 gives every constant of its laws (§4): run whole first
+CURVE_MU = (0.0, 0.3)
 #: independent seeds of every point (its value is their mean, its SE from their spread and
 #: their own SEs: granflow.analysis.replicas)
 REPLICAS = 3
@@ -59,15 +61,19 @@ REPLICAS = 3
 def full_plan() -> Plan:
     """The six mu_s at N = 2000, p_ext = 1e-4: the ratios of RATIOS, MORE_RATIOS and
     NEAR_YIELD, REPLICAS seeds each, then a runaway probe per mu_s of RUNAWAY (one seed).
-    Ordered by cost: every mu_s's highest ratio first (fast flow), down to the ratios near
-    yield (slow flow, the longest runs); a ratio's seeds one after another, so that a campaign
-    stopped part way leaves complete replica sets."""
+    Ordered so that a campaign stopped part way (it is split over sessions) leaves whole
+    pieces: a ratio's seeds one after another; first every mu_s's highest ratio, then all of
+    mu_s = 0 and 0.3 (the frictions 002 gives every constant for: the curve comparison), then
+    the other mu_s ratio by ratio from fast flow down to the slow flows near yield."""
     ratios = {mu: sorted({*rs, *NEAR_YIELD.get(mu, ())}, reverse=True)
               for mu, rs in sorted({**RATIOS, **MORE_RATIOS}.items())}
-    pts = [Point(mu, rs[k], seed)
-           for k in range(max(map(len, ratios.values())))
-           for mu, rs in ratios.items() if k < len(rs)
-           for seed in range(1, REPLICAS + 1)]
+    seeds = range(1, REPLICAS + 1)
+    pts = [Point(mu, rs[0], seed) for mu, rs in ratios.items() for seed in seeds]
+    pts += [Point(mu, r, seed) for mu in CURVE_MU for r in ratios[mu][1:] for seed in seeds]
+    pts += [Point(mu, rs[k], seed)
+            for k in range(1, max(map(len, ratios.values())))
+            for mu, rs in ratios.items() if mu not in CURVE_MU and k < len(rs)
+            for seed in seeds]
     pts += [Point(mu, r, 1) for mu, r in RUNAWAY.items()]
     # (2,000,000 steps: the slowest flows near yield stop there, with the SEs they have)
     return Plan("full", tuple(pts), max_shear={2000: 40_000.0})
