@@ -34,6 +34,7 @@ from .stats import (
     Trend,
     blocking,
     blocking_many,
+    shared_mode_se,
     stationarity,
     steady_state_start,
     trend,
@@ -207,6 +208,8 @@ _NON_OBSERVABLES = {"step", "t", "tilt_flips"}
 KEY_COLUMNS = ("shear_rate", "phi", "p", "mu1")
 #: the quantities whose drift makes a flowing run "drifting" (those the campaigns report)
 DRIFT_COLUMNS = ("I", "phi", "mu1", "mu2")
+#: the series that carries the cell's slow mode (the volume under the barostat)
+SLOW_MODE_REFERENCE = "phi"
 _SHEAR_COMPONENTS = ("L_xy", "L_yx", "L_xz", "L_zx", "L_yz", "L_zy")
 
 
@@ -383,7 +386,12 @@ def analyse_run(
     **classify_kwargs: Any,
 ) -> RunAnalysis:
     """Steady-state detection, classification and mean / SE / correlation time of every
-    observable column (:func:`observable_columns`) of a cell ``series`` table."""
+    observable column (:func:`observable_columns`) of a cell ``series`` table.
+
+    An observable's SE is the larger of its own blocking SE and its SE through the volume's
+    slow mode (:func:`granflow.analysis.stats.shared_mode_se` with phi, SLOW_MODE_REFERENCE,
+    as the reference: the rates follow the volume, and their own blocking curves miss its
+    slow mode)."""
     st = classify_run(series, start=start, **classify_kwargs)
     cols = list(columns) if columns is not None else observable_columns(series)
     t = column(series, "t")
@@ -392,12 +400,18 @@ def analyse_run(
         if cols
         else np.zeros((t.size - st.index, 0))
     )
-    b = blocking_many(mat, sample_interval(t), min_blocks=min_blocks)
+    dt = sample_interval(t)
+    b = blocking_many(mat, dt, min_blocks=min_blocks)
+    se = b.se
+    if SLOW_MODE_REFERENCE in column_names(series) and cols:
+        shared, _ = shared_mode_se(mat, column(series, SLOW_MODE_REFERENCE)[st.index :], dt)
+        own = np.array([c == SLOW_MODE_REFERENCE for c in cols])
+        se = np.where(np.isfinite(shared) & ~own, np.fmax(se, shared), se)
     stats = pl.DataFrame(
         {
             "observable": cols,
             "mean": b.mean,
-            "se": b.se,
+            "se": se,
             "se_err": b.se_err,
             "tau": b.tau,
             "converged": b.converged,

@@ -4,6 +4,7 @@
   plateau rule are in that module's docstring), of many means at once, of a ratio of means.
 * :mod:`.steady` — the end of the start-up transient (MSER) and the trend test.
 * :mod:`.stationarity` — the thirds test: is a steady part stationary (no slow drift)?
+* :mod:`.shared_mode` — the SE of a mean through a slow mode shared with a reference series.
 * :mod:`.se_time` — SE against averaging time and its extrapolation.
 * :mod:`.block_jackknife` — the delete-one-block jackknife.
 
@@ -34,6 +35,7 @@ from .se_time import (
     se_table_result,
     se_vs_time,
 )
+from .shared_mode import REGRESSION_BLOCKS, shared_mode_se
 from .stationarity import DRIFT_Z, Stationarity, stationarity
 from .steady import SteadyStart, Trend, steady_state_start, trend
 
@@ -44,6 +46,7 @@ __all__ = [
     "DRIFT_Z",
     "FIT_MIN_BLOCKS",
     "FIT_TAUS",
+    "REGRESSION_BLOCKS",
     "SECOND_MODE_PENALTY",
     "BlockingArrays",
     "BlockingResult",
@@ -63,6 +66,7 @@ __all__ = [
     "ratio_se",
     "se_table_result",
     "se_vs_time",
+    "shared_mode_se",
     "stationarity",
     "steady_state_start",
     "trend",
