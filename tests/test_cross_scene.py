@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
+from granflow.analysis import replicas
 from granflow.analysis import rheology as rh
 from granflow.continuum import LocalLaw
 from granflow.continuum import calibration as acal
@@ -17,6 +18,7 @@ from granflow.continuum import channel_model as cm
 from granflow.errors import ParameterError
 from granflow.material import MATERIAL_000
 from granflow.studies import cross_scene as cs
+from granflow.studies import cross_scene_report as csr
 
 CHANNEL = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
 
@@ -67,11 +69,74 @@ def test_the_cell_takes_the_channels_material():
 
 
 def test_a_calibration_needs_four_steady_points():
-    rows = [{"p_ext": 2e-4, "tau_ratio": r, "state": "flowing", "converged": True,
+    rows = [{"p_ext": 2e-4, "N": 2000, "tau_ratio": r, "seed": 1, "state": "flowing",
+             "converged": True,
              "I_g": 0.1 * r, "I_g_se": 1e-3, "mu_g": r, "mu_g_se": 1e-3, "phi": 0.6 - r / 10,
              "phi_se": 1e-3, "sigma_g_p": 1.05, "sigma_g_p_se": 1e-3} for r in (0.45, 0.5, 0.6)]
     with pytest.raises(ParameterError, match="p_ext = 0.0002: 3 steady points"):
         acal.calibrate(pl.DataFrame(rows))
+
+
+def _runs(seeds: dict[float, int], n: int = 2000, spread: float = 0.0) -> pl.DataFrame:
+    """Steady calibration runs at p = 2e-4: ``seeds[r]`` seeds at tau/p = r, seed s shifted by
+    ``spread * s`` in every quantity, SE 1e-3."""
+    rows = []
+    for r, k in seeds.items():
+        for s in range(1, k + 1):
+            rows.append({"p_ext": 2e-4, "N": n, "tau_ratio": r, "seed": s, "state": "flowing",
+                         "converged": True, **{
+                             x: v + spread * s for x, v in (("I_g", 0.1 * r), ("mu_g", r),
+                                                            ("phi", 0.6 - r / 10),
+                                                            ("sigma_g_p", 1.05))},
+                         **{f"{x}_se": 1e-3 for x in acal.POINT_OBSERVABLES}})
+    return pl.DataFrame(rows)
+
+
+def test_a_calibration_point_is_its_replicas_mean_with_both_ses():
+    runs = pl.concat([_runs({0.5: 3, 0.6: 1}, spread=0.01), _runs({0.5: 1}, n=10_000)])
+    # a run that did not converge is no replica
+    runs = pl.concat([runs, runs.head(1).with_columns(
+        seed=pl.lit(9, pl.Int64), converged=pl.lit(False), mu_g=pl.lit(99.0))])
+    pts = acal.pooled_points(runs)
+    # the cell sizes stay apart: three points
+    assert pts.select("N", "tau_ratio", "replicas").rows() == [
+        (2000, 0.5, 3), (2000, 0.6, 1), (10_000, 0.5, 1)]
+    three = pts.row(0, named=True)
+    assert three["mu_g"] == pytest.approx(0.5 + 0.02)
+    assert three["mu_g_se_within"] == pytest.approx(math.sqrt(3) * 1e-3 / 3)
+    # seeds 1-3 shifted by 0.01 each: SD 0.01, the Student factor of 3 replicas
+    fac = replicas.small_sample_factor(3)
+    assert three["mu_g_se_between"] == pytest.approx(fac * 0.01 / math.sqrt(3))
+    assert three["mu_g_se"] == pytest.approx(max(three["mu_g_se_within"],
+                                                 three["mu_g_se_between"]))
+    one = pts.row(1, named=True)
+    assert one["phi_se"] == pytest.approx(1e-3) and math.isnan(one["phi_se_between"])
+
+
+def test_the_full_plan_runs_three_seeds_per_point():
+    plan = cs.full_plan()
+    seeds: dict[tuple[float, int, float], set[int]] = {}
+    for pt in plan.points:
+        seeds.setdefault((pt.p_ext, pt.N, pt.tau_ratio), set()).add(pt.seed)
+    assert min(len(s) for s in seeds.values()) >= 3
+    assert len(plan.points) == len(set(plan.points))
+
+
+def test_the_coverage_section_is_computed_from_the_replicas(tmp_path):
+    one = csr.coverage_lines(_runs({0.5: 1, 0.6: 1}), tmp_path)
+    text = "\n".join(one)
+    assert "2 calibration points with steady runs: 2 with 1 replica." in text
+    assert "No point has two steady replicas" in text and "| observable |" not in text
+    # SEs 1e-3, seeds 0.01 apart: pairs 0.01, 0.02, 0.01 (3 replicas) and 0.01 (2), over a
+    # combined SE sqrt(2) 1e-3: rms z = sqrt(7/4) 7.07, far above 1
+    many = "\n".join(csr.coverage_lines(_runs({0.5: 3, 0.6: 2}, spread=0.01), tmp_path))
+    assert "1 with 2 replicas, 1 with 3 replicas" in many
+    row = next(ln for ln in many.splitlines() if ln.startswith("| mu_g |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[1:4] == ["2", "4", "3"]
+    assert float(cells[4]) == pytest.approx(math.sqrt(7 / 4) * 0.01 / math.sqrt(2e-6), abs=0.01)
+    assert "The run SEs are too small for I_g, mu_g, phi (" in many
+    assert f"python -m granflow.analysis.coverage {tmp_path} --by p_ext,N,tau_ratio" in many
 
 
 def test_a_channel_dataset_without_steady_runs_is_refused(tmp_path):

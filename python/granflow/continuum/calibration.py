@@ -20,7 +20,8 @@ from granflow.errors import ParameterError
 @dataclass
 class Calibration:
     """The local law fitted at one cell pressure: the fits (with covariance, scaled by
-    max(1, red chi^2) where the scatter exceeds the SEs) and the pooled points they used."""
+    max(1, red chi^2) where the scatter exceeds the SEs) and the points they used
+    (:func:`pooled_points`)."""
 
     p_ext: float
     mu_fit: FitResult
@@ -42,15 +43,26 @@ class Calibration:
         return self.law.sample(mu_cov, phi_cov, n, np.random.default_rng(seed))
 
 
-def pooled_points(points: pl.DataFrame) -> pl.DataFrame:
-    """The steady calibration points (flowing and converged), seeds and cell sizes at the
-    same (p_ext, tau/p) pooled inverse-variance (rheology.pool_realizations)."""
-    from granflow.analysis.rheology import pool_realizations
+#: a calibration point: runs with these fields equal and different seeds are its replicas
+POINT = ("p_ext", "N", "tau_ratio")
+#: the quantities a calibration point keeps
+POINT_OBSERVABLES = ("I_g", "mu_g", "phi", "sigma_g_p")
 
-    d = points.filter((pl.col("state") == "flowing") & pl.col("converged"))
-    cols = ["p_ext", "tau_ratio"]
-    keep = [c for c in ("I_g", "mu_g", "phi", "sigma_g_p") for c in (c, f"{c}_se")]
-    return pool_realizations(d.select(*cols, *keep), cols)
+
+def steady_points(points: pl.DataFrame) -> pl.DataFrame:
+    """The calibration runs that count: flowing and converged."""
+    return points.filter((pl.col("state") == "flowing") & pl.col("converged"))
+
+
+def pooled_points(points: pl.DataFrame) -> pl.DataFrame:
+    """One row per calibration point (:data:`POINT`: the cell sizes stay apart, they are not
+    replicas) from its steady runs (:func:`steady_points`): ``replicas`` and, per quantity of
+    :data:`POINT_OBSERVABLES`, the replicas' mean with ``X_se`` (the larger of the within-run
+    and between-replica SEs), ``X_se_within`` and ``X_se_between``
+    (analysis.replicas.replica_mean)."""
+    from granflow.analysis.replicas import replica_mean
+
+    return replica_mean(steady_points(points), POINT, POINT_OBSERVABLES)
 
 
 def calibrate(points: pl.DataFrame) -> dict[float, Calibration]:

@@ -60,16 +60,25 @@ def _plan(name: str, points: Iterable[Point], stint_steps: int,
                 max_shear={n: s * f for n, s in max_shear_steps.items()}, **kw)
 
 
+#: independent seeds per calibration point of the full plan (issue 34: a point's SE from the
+#: spread between replicas as well as from each run's own)
+SEEDS = (1, 2, 3)
+
+
 def full_plan() -> Plan:
-    """N = 2000 over RATIOS at p a/kn = 2e-4 and 5e-4 (seed 1, then seed 2), then near yield
-    NEAR_YIELD with seeds 1-3 and NEAR_YIELD_LARGE at N = 10,000 (p = 2e-4), then NEAR_YIELD
-    at 5e-4 (seeds 1-3), then BELOW_YIELD_LARGE at N = 10,000."""
-    pts = [Point(MU_CHANNEL, r, s, p_ext=p) for s in (1, 2) for p in (P_LOW, P_HIGH)
+    """N = 2000 over RATIOS at p a/kn = 2e-4 and 5e-4, then near yield NEAR_YIELD and
+    NEAR_YIELD_LARGE at N = 10,000 (p = 2e-4), then NEAR_YIELD at 5e-4, then
+    BELOW_YIELD_LARGE at N = 10,000: every point with the seeds SEEDS, seed by seed within each
+    stage. A resumed campaign skips the runs its dataset holds (the committed one: seeds 1-2
+    over RATIOS, 1-3 near yield at N = 2000, seed 1 at N = 10,000)."""
+    pts = [Point(MU_CHANNEL, r, s, p_ext=p) for s in SEEDS for p in (P_LOW, P_HIGH)
            for r in RATIOS]
-    pts += [Point(MU_CHANNEL, r, s, p_ext=P_LOW) for s in (1, 2, 3) for r in NEAR_YIELD]
-    pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in NEAR_YIELD_LARGE]
-    pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in (1, 2, 3) for r in NEAR_YIELD]
-    pts += [Point(MU_CHANNEL, r, 1, N=10_000, p_ext=P_LOW) for r in BELOW_YIELD_LARGE]
+    pts += [Point(MU_CHANNEL, r, s, p_ext=P_LOW) for s in SEEDS for r in NEAR_YIELD]
+    pts += [Point(MU_CHANNEL, r, s, N=10_000, p_ext=P_LOW) for s in SEEDS
+            for r in NEAR_YIELD_LARGE]
+    pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in SEEDS for r in NEAR_YIELD]
+    pts += [Point(MU_CHANNEL, r, s, N=10_000, p_ext=P_LOW) for s in SEEDS
+            for r in BELOW_YIELD_LARGE]
     return _plan("full", pts, stint_steps=20_000,
                  max_shear_steps={2000: 1_000_000, 10_000: 400_000})
 

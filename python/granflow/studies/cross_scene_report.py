@@ -13,8 +13,9 @@ import numpy as np
 import polars as pl
 from matplotlib.figure import Figure
 
+from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import ZONE_COLOURS, save_figure
-from granflow.continuum.calibration import fits_table
+from granflow.continuum.calibration import POINT, fits_table, steady_points
 from granflow.continuum.channel_model import (
     A_PHI_BAR,
     A_WIDTH,
@@ -344,11 +345,12 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "I and mu1 use |D| and p; sigma_yy/p = "
         f"{_float(pooled['sigma_g_p'].mean()):.3f} here, so the two differ by ~5 % in mu and a "
         "factor ~1.95 in I).", "",
-        "Pooled points (seeds and sizes inverse-variance; SEs are blocking SEs):", "",
-        md_table(pooled.select("p_ext", "tau_ratio", "n_runs", "I_g", "I_g_se", "mu_g",
-                               "mu_g_se", "phi", "phi_se", "sigma_g_p"),
-                 {"p_ext": ".0e", "tau_ratio": ".3f", "I_g_se": ".2g", "mu_g_se": ".2g",
-                  "phi_se": ".2g"}), "",
+        "The calibration points: per (p_ext, N, tau/p) the mean of its steady replicas "
+        "(flowing and converged runs with different seeds; the cell sizes stay apart); its SE "
+        "the larger of the within-run SE (the runs' blocking SEs, combined) and the "
+        "between-replica SE (their spread over sqrt(replicas), times the Student factor "
+        "for few replicas; none for one replica), both shown as (within / between):", "",
+        md_table(_points_table(pooled), {"p_ext": ".0e", "tau_ratio": ".3f"}), "",
         "Fits: mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) (Jop, Forterre & Pouliquen 2006; "
         "row 'mu', the law the models use: c0 = mu_s, A = mu_2, a = I_0) and phi = phi_0 - "
         "A4 I^a4 (002 (4.7); row 'phi'); 002's mu1 = mu1_0 + A1 I^a1 (4.2) beside them for "
@@ -399,6 +401,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "",
         md_table(_residual_table(pred.residuals)), "",
         "## Figures", "", *[f"![{p.stem}]({p.relative_to(rel)})" for p in figs], ""]
+    lines += coverage_lines(points, out)
     if se.height:
         lines += ["## Error against run time (calibration)", "",
                   "Median over the steady calibration runs of the SE over the first quarter "
@@ -414,6 +417,74 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def _points_table(pooled: pl.DataFrame) -> pl.DataFrame:
+    """The calibration points (calibration.pooled_points): each quantity's mean and its SE
+    with the within-run and between-replica SEs beside it."""
+    cols: list[pl.Expr] = [pl.col("p_ext"), pl.col("N"), pl.col("tau_ratio"),
+                           pl.col("replicas")]
+    for x in ("I_g", "mu_g", "phi"):
+        cols += [pl.col(x).round_sig_figs(4),
+                 pl.format("{} ({} / {})", *(pl.col(f"{x}_se{t}").round_sig_figs(2)
+                                              for t in ("", "_within", "_between")))
+                 .alias(f"{x} SE (within / between)")]
+    return pooled.sort("p_ext", "N", "tau_ratio").select(
+        *cols, pl.col("sigma_g_p").round_sig_figs(4))
+
+
+#: the quantities of the calibration's coverage audit (those the fits use)
+AUDITED = ("I_g", "mu_g", "phi")
+
+
+def coverage_lines(points: pl.DataFrame, out: Path) -> list[str]:
+    """The coverage audit of the calibration points' replicas (analysis.coverage, over the
+    runs that count, calibration.steady_points), in words computed from the data, with the
+    command that reads the dataset."""
+    steady = steady_points(points)
+    by = list(POINT)
+    reps = steady.group_by(by).len()
+    counts = ", ".join(f"{v} with {k} replica{'s' if k > 1 else ''}" for k, v in sorted(
+        reps.group_by("len").agg(pl.len().alias("n")).select("len", "n").iter_rows()))
+    tab = coverage(steady, by, AUDITED)
+    cmd = (f"`python -m granflow.analysis.coverage {out} --by {','.join(by)} "
+           f"--observables {','.join(AUDITED)}`")
+    extra = steady_rows(points).height - steady.height
+    lines = ["## Coverage audit (calibration)", "",
+             f"Do the points' SEs hold across seeds? {reps.height} calibration points with "
+             f"steady runs: {counts or 'none'}. "]
+    if not int(tab["pairs"].max() or 0):  # type: ignore[arg-type]
+        lines[-1] += ("No point has two steady replicas, so there is no pair to audit: the "
+                      "points' SEs are their runs' own blocking SEs, untested across seeds.")
+        return lines + [""]
+    inside = [r["observable"] for r in tab.iter_rows(named=True)
+              if r["rms_z_lo"] <= 1.0 <= r["rms_z_hi"]]
+    above = [r["observable"] for r in tab.iter_rows(named=True) if r["rms_z_lo"] > 1.0]
+    below = [r["observable"] for r in tab.iter_rows(named=True) if r["rms_z_hi"] < 1.0]
+    lines[-1] += (
+        "For every pair of replicas of a point, z = (x_a - x_b)/sqrt(se_a^2 + se_b^2) with the "
+        "runs' own SEs; its rms over the pairs is 1 for honest SEs, with the 95 % interval "
+        "of the chi-squared distribution on dof = sum over points of (replicas - 1) "
+        "(few pairs: wide):")
+    show = tab.select("observable", "points", "pairs", "dof", "rms_z",
+                      pl.format("{} - {}", pl.col("rms_z_lo").round(2),
+                                pl.col("rms_z_hi").round(2)).alias("95 % interval"),
+                      "max_abs_z", pl.col("worst").alias("worst pair"))
+    verdict = []
+    if inside:
+        verdict.append(f"1 lies in the interval for {', '.join(inside)}")
+    if above:
+        verdict.append(f"the run SEs are too small for {', '.join(above)} (the interval "
+                       "lies above 1: the replica spread, which the points' SEs include, "
+                       "exceeds them)")
+    if below:
+        verdict.append(f"the run SEs are larger than the spread for {', '.join(below)}")
+    said = "; ".join(verdict)
+    lines += ["", md_table(show, {"rms_z": ".2f", "max_abs_z": ".1f"}), "",
+              said[:1].upper() + said[1:] + ". The same table: " + cmd
+              + (f" (it counts every flowing run, converged or not: {extra} more here)"
+                 if extra else "") + ".", ""]
+    return lines
 
 
 def _near_yield(points: pl.DataFrame, law: Any) -> str:

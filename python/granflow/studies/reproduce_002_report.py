@@ -17,18 +17,8 @@ from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.replicas import replica_mean
 
 from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
+from .reproduce_002_figures import plot_figures
 
-#: figures: (file, title, [(column, I power, axis label)]); every panel against I (or I^2)
-FIGURES: tuple[tuple[str, str, tuple[tuple[str, int, str], ...]], ...] = (
-    ("fig3_mu1.png", "fig. 3: mu1 = tau/p against I, (4.2)", (("mu1", 1, "mu1"),)),
-    ("fig4_mu2.png", "fig. 4: mu2 = -N0/p against I^2, (4.4)", (("mu2", 2, "mu2"),)),
-    ("fig5_mu3.png", "fig. 5: mu3 against I^2, (4.6)", (("mu3", 2, "mu3"),)),
-    ("fig6_phi.png", "fig. 6: phi against I, (4.7)", (("phi", 1, "phi"),)),
-    ("fig7_normal_stress.png", "fig. 7: normal stress differences",
-     (("N0_tau", 1, "N0/tau (5.3)"), ("N1_tau", 1, "N1/tau (5.4)"))),
-    ("fig8_fabric.png", "fig. 8: fabric and contacts",
-     (("A_xy", 1, "fabric A_xy (5.1)"), ("Z2", 1, "Z2"), ("theta_c", 1, "theta_c"))),
-)
 #: the laws' parameters, in the order of the report's table
 PARAMS = (("A1", "mu1"), ("A2", "mu2"), ("A3", "mu3"), ("A4", "phi"), ("mu1_0", "mu1"),
           ("a1", "mu1"), ("mu2_0", "mu2"), ("a2", "mu2"), ("mu3_0", "mu3"), ("a3", "mu3"),
@@ -283,61 +273,6 @@ def offsets(pool: pl.DataFrame, n: int = 2000) -> pl.DataFrame:
     return pl.DataFrame(rows).sort(["mu_s", "p_ext"]) if rows else pl.DataFrame()
 
 
-def plot_figures(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
-                 directory: Path, n: int = 2000) -> list[Path]:
-    """Figures 3-8 as PNG: every mu_s a colour (points with SE bars, our fit solid, the paper's
-    curve dashed where it gives the parameters), N = 10,000 as open symbols."""
-    from matplotlib.figure import Figure
-
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = []
-    mus = sorted(set(pool["mu_s"].to_list()))
-    colours = {mu: f"C{i}" for i, mu in enumerate(mus)}
-    for fname, title, panels in FIGURES:
-        fig = Figure(figsize=(5.2 * len(panels), 4.2))
-        for k, (col, power, lab) in enumerate(panels):
-            ax = fig.add_subplot(1, len(panels), k + 1)
-            if col not in pool.columns:
-                ax.set_title(f"{lab}: no data")
-                continue
-            for mu in mus:
-                for nn, marker, face in ((n, "o", None), (10_000, "s", "none")):
-                    g = pool.filter((pl.col("mu_s") == mu) & (pl.col("N") == nn))
-                    if not g.height:
-                        continue
-                    ii = g["I"].to_numpy()
-                    ax.errorbar(ii**power, g[col].to_numpy(),
-                                xerr=power * ii ** (power - 1) * g["I_se"].to_numpy(),
-                                yerr=g[f"{col}_se"].to_numpy(), fmt=marker, ms=4, capsize=2,
-                                color=colours[mu], mfc=face,
-                                label=f"granflow mu_s={mu:g}, N={nn}")
-                g = pool.filter((pl.col("mu_s") == mu) & (pl.col("N") == n))
-                if not g.height or col not in rh.LAWS:
-                    continue
-                grid = np.logspace(np.log10(g["I"].min()) - 0.15,  # type: ignore[arg-type]
-                                   np.log10(g["I"].max()) + 0.1, 100)  # type: ignore[arg-type]
-                f = fits.get(mu, {}).get(col)
-                if f is not None and f.success:
-                    ax.plot(grid**power, f(grid), "-", color=colours[mu], lw=1,
-                            label=f"fit {rh.LAWS[col].equation.split()[0]}, mu_s={mu:g}")
-                off = f.params["mu3_0"] if (col == "mu3" and f is not None) else None
-                try:
-                    ax.plot(grid**power, rh.reference_curve(col, grid, mu, offset=off), "--",
-                            color=colours[mu], lw=1, label=f"paper 002, mu_s={mu:g}")
-                except ValueError:
-                    pass  # the paper gives no complete parameter set at this mu_s
-            ax.set_xscale("log")
-            ax.set_xlabel("I" if power == 1 else "I^2")
-            ax.set_ylabel(lab)
-            ax.legend(fontsize=6)
-        fig.suptitle(title, fontsize=10)
-        fig.tight_layout()
-        p = directory / fname
-        fig.savefig(p, dpi=100)
-        paths.append(p)
-    return paths
-
-
 def se_shrink(se: pl.DataFrame) -> pl.DataFrame:
     """Per observable: median over points of SE(fraction)/SE(all) against sqrt(1/fraction),
     over the points with both SEs (a fraction with too little data has none)."""
@@ -490,8 +425,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
     fits = fits_by_mu(pool, n_main)
     rows = table_rows(fits)
     figdir = path.parent / f"{path.stem}_figures"
-    figs = plot_figures(pool.filter((pl.col("p_ext") / P_MAIN - 1).abs() < 1e-9), fits, figdir,
-                        n_main)
+    figs = plot_figures(pool, fits, figdir, n_main)
     if se.height:
         figs.append(plot_campaign_se(se, figdir / "se_vs_time.png", ("I", "phi", "mu1"),
                                      ("mu_s", "N", "tau_ratio", "seed"),
