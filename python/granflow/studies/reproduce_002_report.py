@@ -305,15 +305,15 @@ COVERAGE_BAND = (0.7, 1.4)
 def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) -> list[str]:
     """The runs, the stop rule, the states, and the runs that do not count (drifting, too
     little data, stopped at the cap)."""
-    reps = (points.filter(pl.col("state") != "runaway").group_by(list(KEYS)).len()["len"]
-            if points.height else pl.Series([0]))
+    reps = points.group_by(list(KEYS)).len()["len"].to_numpy()
+    most = int(reps.max()) if reps.size else 0
     lines = [
         f"{points.height} cell runs (granflow.scenes.cell.ShearCell, defaults but for the point: "
         "collision reading of t_c, e_n = exp(-1/4), kt = kn, gamma_t = gamma_n/2, diameters "
         "uniform in [0.9, 1.1], dt = 0.02 t_c, compacted start), p_ext = "
         + ", ".join(f"{p:.0e}" for p in sorted(set(points["p_ext"].to_list()), reverse=True))
-        + f" kn/a; {reps.min()}-{reps.max()} independent seeds per point (the runaway probes "
-        "one). States: " + ", ".join(f"{k} {v}" for k, v in sorted(
+        + f" kn/a; {most} independent seeds per point ({int((reps < most).sum())} points with "
+        "fewer: the runaway probes, one each). States: " + ", ".join(f"{k} {v}" for k, v in sorted(
             points["state"].value_counts().iter_rows())) + ".", "",
         "**The stop rule** (`granflow.studies._campaign.cell.converged`), in stints of "
         f"{plan.stint:g} t_c: a run counts only once it is flowing and stationary (the means "
