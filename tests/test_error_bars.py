@@ -236,3 +236,13 @@ def test_the_shared_slow_mode_is_in_the_se():
     # (measured: 1.13 and 0.78; a ratio from 300 replicas is itself uncertain by ~4 %)
     assert ratio_own > 1.05 and 0.7 < ratio_shared < 1.05, (ratio_own, ratio_shared)
     assert all(math.isnan(v) for v in shared_mode_se(np.ones(10), np.arange(10.0))[0])
+
+
+def test_replicas_that_disagree_are_found():
+    d = pl.DataFrame({"point": [0, 0, 0, 1, 1, 1], "x": [1.0, 1.01, 0.99, 1.0, 1.0, 1.2],
+                      "x_se": [0.01] * 6})
+    r = replica_mean(d, ["point"], ["x"])
+    p = dict(zip(r["point"], r["x_agree_p"], strict=True))
+    assert p[0] > 0.3 and p[1] < 1e-6  # (Q = 2 + 0 + ... against 1800 for the second)
+    one = replica_mean(d.head(1), ["point"], ["x"])
+    assert math.isnan(one["x_agree_p"][0]) and one["x_se"][0] == 0.01

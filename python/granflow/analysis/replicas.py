@@ -11,6 +11,13 @@ Two estimates of the variance of the replicas' mean ``xbar = sum(x_i) / k``:
 The point's SE is the larger of the two: honest run SEs make them agree (to the between
 estimate's own ~50 % scatter at k = 3), and where the runs' SEs are too small (a slow mode
 they do not see) the replicas' spread shows it. Both are kept beside it.
+
+Whether the replicas agree at all: ``Q = sum_i (x_i - xw)^2 / se_i^2`` (``xw`` their
+inverse-variance mean) is chi-squared with k - 1 degrees of freedom when they sample one
+steady state with honest SEs; ``X_agree_p`` is its upper tail. A point whose replicas disagree
+far beyond their errors (:data:`DISAGREE_P`) has no reproducible steady state at this run
+length (near a runaway the flow wanders for thousands of t_c): a campaign lists it and does
+not fit it.
 """
 
 from __future__ import annotations
@@ -23,10 +30,13 @@ from scipy import stats
 
 from .tables import TableLike, to_polars
 
-__all__ = ["MIN_REPLICAS", "replica_mean", "small_sample_factor"]
+__all__ = ["DISAGREE_P", "MIN_REPLICAS", "replica_mean", "small_sample_factor"]
 
 #: fewest replicas for a between-replica SE (one replica: the within SE alone)
 MIN_REPLICAS = 2
+#: replicas whose agreement test gives p below this disagree (a 3.3-sigma event for honest
+#: SEs; with ~40 points and 4 quantities, ~0.2 false alarms per campaign)
+DISAGREE_P = 1e-3
 
 
 def small_sample_factor(k: int) -> float:
@@ -43,7 +53,8 @@ def replica_mean(df: TableLike, by: Sequence[str],
     count, e.g. flowing and stationary ones): ``replicas`` (k), and per observable ``X`` (a
     column ``X`` with ``X_se`` beside it; default every such pair): ``X`` the replicas' mean,
     ``X_se_within``, ``X_se_between`` (module docstring; NaN for one replica) and ``X_se`` the
-    larger. A replica without a finite ``X_se`` (too little data for its own SE) makes the
+    larger, and ``X_agree_p`` (the replicas' agreement test, module docstring; NaN for one
+    replica). A replica without a finite ``X_se`` (too little data for its own SE) makes the
     group's ``X_se_within``, and so ``X_se``, NaN."""
     d = to_polars(df)
     obs = list(observables) if observables is not None else [
@@ -64,6 +75,12 @@ def replica_mean(df: TableLike, by: Sequence[str],
                        else math.nan)
             row[o] = mean
             row[f"{o}_se"] = (max(within, between) if math.isfinite(between) else within)
+            agree = math.nan
+            if k >= MIN_REPLICAS and math.isfinite(within) and (se > 0).all():
+                w = 1.0 / se**2
+                q = float((w * (x - (w * x).sum() / w.sum()) ** 2).sum())
+                agree = float(stats.chi2.sf(q, k - 1))
+            row[f"{o}_agree_p"] = agree
             row[f"{o}_se_within"] = within
             row[f"{o}_se_between"] = between
         groups.append(row)

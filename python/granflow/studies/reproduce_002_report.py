@@ -14,7 +14,7 @@ import polars as pl
 
 from granflow.analysis import rheology as rh
 from granflow.analysis.coverage import coverage, steady_rows
-from granflow.analysis.replicas import replica_mean
+from granflow.analysis.replicas import DISAGREE_P, replica_mean
 
 from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
 from .reproduce_002_figures import plot_figures
@@ -98,10 +98,22 @@ def pooled(points: pl.DataFrame) -> pl.DataFrame:
     return replica_mean(flow, list(KEYS), obs)
 
 
-def usable(pool: pl.DataFrame) -> pl.Expr:
+def has_errors(pool: pl.DataFrame) -> pl.Expr:
     """The points whose reported quantities all have an SE (none from too little data)."""
     return pl.all_horizontal([pl.col(f"{c}_se").is_finite() for c in REPORTED
                               if f"{c}_se" in pool.columns])
+
+
+def agreeing(pool: pl.DataFrame) -> pl.Expr:
+    """The points whose replicas agree in every reported quantity (the chi-squared test of
+    :func:`granflow.analysis.replicas.replica_mean`; one replica: nothing to test)."""
+    return pl.all_horizontal([~(pl.col(f"{c}_agree_p") < DISAGREE_P) for c in REPORTED
+                              if f"{c}_agree_p" in pool.columns])
+
+
+def usable(pool: pl.DataFrame) -> pl.Expr:
+    """The points that are fitted: :func:`has_errors` and :func:`agreeing`."""
+    return has_errors(pool) & agreeing(pool)
 
 
 #: the campaign's pressure (the fits and figures use it; other pressures are compared apart)
@@ -349,12 +361,24 @@ def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) ->
                   "", md_table(tab, {"SE(I)/I": ".3f", "SE(phi)/phi": ".4f",
                                      "SE(mu1)/mu1": ".4f", "T_avg": ".0f", "T (t_c)": ".0f",
                                      "tau_max (t_c)": ".0f"})]
-    lacking = pool.filter(~usable(pool))
+    lacking = pool.filter(~has_errors(pool))
     if lacking.height:
         lines += ["", f"{lacking.height} points lack an SE of a reported quantity (too little "
                   "data) and are not fitted: " + ", ".join(
                       f"mu_s = {r['mu_s']:g}, tau/p = {r['tau_ratio']:g}"
                       for r in lacking.iter_rows(named=True)) + "."]
+    apart = pool.filter(has_errors(pool) & ~agreeing(pool))
+    if apart.height:
+        def worst(r: Mapping[str, Any]) -> str:
+            c = min(REPORTED, key=lambda c: r.get(f"{c}_agree_p", 1.0))
+            return f"{c}: p = {r[f'{c}_agree_p']:.1e}"
+
+        lines += ["", f"{apart.height} points have replicas that disagree beyond their SEs (the "
+                  f"chi-squared test of their agreement, p < {DISAGREE_P:g}, "
+                  "`granflow.analysis.replicas`): no reproducible steady state at this run "
+                  "length; listed, not fitted: " + "; ".join(
+                      f"mu_s = {r['mu_s']:g}, tau/p = {r['tau_ratio']:g} ({worst(r)})"
+                      for r in apart.iter_rows(named=True)) + "."]
     return lines
 
 
@@ -406,11 +430,16 @@ def points_markdown(pool: pl.DataFrame) -> str:
         return (f"{v:.{dig}f} ± {e:.{dig}f} ({w:.{dig}f} / {b:.{dig}f})" if math.isfinite(e)
                 else f"{v:.{dig}f} (not enough data)")
 
-    out = ["| mu_s | N | p_ext | tau/p | seeds | " + " | ".join(cols) + " |",
-           "|" + "---|" * (5 + len(cols))]
+    def agree(r: Mapping[str, Any]) -> str:
+        ps = [r[f"{c}_agree_p"] for c in cols if math.isfinite(r.get(f"{c}_agree_p", math.nan))]
+        return f"{min(ps):.2g}" if ps else "-"
+
+    out = ["| mu_s | N | p_ext | tau/p | seeds | " + " | ".join(cols)
+           + " | replicas agree (smallest p) |", "|" + "---|" * (6 + len(cols))]
     for r in pool.sort(list(KEYS)).iter_rows(named=True):
         out.append(f"| {r['mu_s']:g} | {r['N']} | {r['p_ext']:.0e} | {r['tau_ratio']:g} | "
-                   f"{r['replicas']} | " + " | ".join(cell(r, c) for c in cols) + " |")
+                   f"{r['replicas']} | " + " | ".join(cell(r, c) for c in cols)
+                   + f" | {agree(r)} |")
     return "\n".join(out)
 
 
