@@ -100,15 +100,16 @@ def pooled(points: pl.DataFrame) -> pl.DataFrame:
 
 def has_errors(pool: pl.DataFrame) -> pl.Expr:
     """The points whose reported quantities all have an SE (none from too little data)."""
-    return pl.all_horizontal([pl.col(f"{c}_se").is_finite() for c in REPORTED
-                              if f"{c}_se" in pool.columns])
+    tests = [pl.col(f"{c}_se").is_finite() for c in REPORTED if f"{c}_se" in pool.columns]
+    return pl.all_horizontal(tests) if tests else pl.lit(True)
 
 
 def agreeing(pool: pl.DataFrame) -> pl.Expr:
     """The points whose replicas agree in every reported quantity (the chi-squared test of
     :func:`granflow.analysis.replicas.replica_mean`; one replica: nothing to test)."""
-    return pl.all_horizontal([~(pl.col(f"{c}_agree_p") < DISAGREE_P) for c in REPORTED
-                              if f"{c}_agree_p" in pool.columns])
+    tests = [~(pl.col(f"{c}_agree_p") < DISAGREE_P) for c in REPORTED
+             if f"{c}_agree_p" in pool.columns]
+    return pl.all_horizontal(tests) if tests else pl.lit(True)
 
 
 def usable(pool: pl.DataFrame) -> pl.Expr:
