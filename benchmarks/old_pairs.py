@@ -7,7 +7,8 @@ cell campaign's row and stop rule of today.
 The old rows come from docs/data/reproduce_002/points.parquet at git revision ``--rev`` (the
 dataset before the re-run). Per run: I then and now (equal: the same run), the state now (a
 drift across the steady part makes it "drifting"), the thirds test's largest |z|, the steady
-length T_avg against the minimum the stop rule asks for, and whether the rule lets it stop.
+part's length against the minimum the stop rule asks for (both in t_c), and whether the rule
+lets it stop.
 """
 
 from __future__ import annotations
@@ -32,22 +33,25 @@ def old_points(rev: str) -> pl.DataFrame:
     return pl.read_parquet(io.BytesIO(raw))
 
 
-def judge(mu_s: float, tau: float, seed: int, steps: int) -> dict[str, object]:
+def judge(mu_s: float, tau: float, seed: int, steps: int, threads: int = 1
+          ) -> dict[str, object]:
     """Run the point ``steps`` steps of shear and return today's row and verdict."""
     from granflow.studies._campaign.cell import STUDY, Point, long_enough, point_row
     from granflow.studies.reproduce_002 import full_plan
 
     plan = full_plan()
     p = Point(mu_s, tau, seed)
-    cell = STUDY.scene(p, plan, 1)
+    cell = STUDY.scene(p, plan, threads)
     cell.prepare(progress=False)
     cell.run(steps, progress=False)
     row = point_row(p, plan, cell.tables()["series"], float(cell.shear_start_time))
     return {"mu_s": mu_s, "tau_ratio": tau, "seed": seed, "shear_steps": steps,
             "I now": row.get("I"), "state now": str(row["state"]),
             "drift |z|": row.get("drift_z"), "drift in": row.get("drift_quantity"),
-            "T_avg": row.get("T_avg"),
-            "minimum": max(plan.min_length, plan.min_taus * row.get("tau_max", 0.0)),
+            "T (t_c)": row.get("T_avg_tc"),
+            # (tau_max in kernel time, as T_avg: over T_avg / T_avg_tc in t_c)
+            "minimum (t_c)": max(plan.min_length, plan.min_taus * row.get("tau_max", 0.0)
+                                 * row.get("T_avg_tc", 0.0) / row.get("T_avg", 1.0)),
             "may stop": bool(long_enough(row, plan))}
 
 
@@ -72,7 +76,7 @@ def main() -> int:
         rows.append({**row, "I then": i, "SE then": se, "state then": st})
     d = pl.DataFrame(rows).sort("mu_s", "tau_ratio", "seed").select(
         "mu_s", "tau_ratio", "seed", "shear_steps", "state then", "I then", "SE then", "I now",
-        "state now", "drift |z|", "drift in", "T_avg", "minimum", "may stop")
+        "state now", "drift |z|", "drift in", "T (t_c)", "minimum (t_c)", "may stop")
     with pl.Config(tbl_rows=-1, tbl_cols=-1, tbl_width_chars=220):
         print(d)
     counted = d.filter(pl.col("state now") == "flowing").filter(pl.col("may stop"))
