@@ -609,8 +609,9 @@ def stop_rule(plan: Any) -> str:
 
 
 def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
-    seeds = (points.filter(pl.col("parent") == "").group_by(list(POINT_BY)).len()["len"]
-             if points.height else pl.Series([0]))
+    per = (points.filter(pl.col("parent") == "").group_by(list(POINT_BY)).len()["len"]
+           .to_numpy() if points.height else np.zeros(1, dtype=np.int64))
+    lo, hi = int(per.min()), int(per.max())
     lines = ["## What was run", "",
              f"{points.height} channel runs (granflow.scenes.channel.Channel: 000's material "
              "and contact law, e_n = 0.82, μ_p = 0.5, k_t = 2/7 k_n, the 0.9/1.0/1.1 mix; "
@@ -623,8 +624,7 @@ def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
         # (a dataset written before the stationarity test and the minimum length has no
         # tau_max column)
         lines += ["**This dataset was run under the earlier rule**: "
-                  + (f"{seeds.min()} seed per point" if seeds.max() == seeds.min() == 1 else
-                     f"{seeds.min()}-{seeds.max()} seeds per point")
+                  + ("1 seed per point" if hi == lo == 1 else f"{lo}-{hi} seeds per point")
                   + ", no stationarity test, and "
                   "each point stopped as soon as the SEs of u_slip and u_max met their target "
                   "after the minimum averaging time, without a minimum in correlation times "
@@ -820,7 +820,7 @@ def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
                             "max_abs_z": ".1f"}), ""]
     pairs = int(tab["pairs"].sum()) if tab.height else 0
     if pairs == 0:
-        k = int(per.max()) if per is not None and per.len() else 0
+        k = int(per.to_numpy().max()) if per is not None and per.len() else 0
         lines += [f"**No pairs: coverage cannot be audited on this dataset.** It holds at most "
                   f"{k} steady replica{'s' if k != 1 else ''} of a point"
                   + (f" (or their SEs are {NED})" if k > 1 else "")
