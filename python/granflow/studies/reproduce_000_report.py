@@ -911,7 +911,8 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     out += ["", "Why the numbers differ from 000's, as far as this campaign can tell:", "",
             f"- Width: 000's ratio and collapse claims are for W = 60-150 (collapse only for "
             f"W >= 100); the widest channel here is W = {widest:g}."
-            + (" u_max/u_slip (the per-width lines above) rises with W toward 1.37-1.40."
+            + (" u_max/u_slip (the per-width lines above) rises with W toward 1.37-1.40"
+               + (f" (values; their SEs: {NED})." if any(ratios["SE"]) else ".")
                if ratios.height > 1 and bool(np.all(np.diff(
                    [float(x.split(" ")[0]) for x in ratios["u_max/u_slip"]]) > 0)) else "")]
     if fam.height > 1:
