@@ -77,8 +77,9 @@ REPORTED = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "mean_velocity_
 #: a point's fields less the seed (and the parent key, which names its parent's seed): the
 #: replicas of a point share them
 POINT_BY = ("W", "phi_bar", "kn", "B", "H")
-#: independent seeds of every point of the full and paper plans
+#: independent seeds of every point of the full and paper plans, and those seeds
 REPLICAS = 3
+SEEDS = tuple(range(1, REPLICAS + 1))
 #: sample interval in time units (~100 steps at k_n = 1e5) and samples per window
 SAMPLE_DT = 0.04
 WINDOW = 50
@@ -128,8 +129,9 @@ class Plan:
     t_max: float = 1500.0
     #: steady averaging time a point needs at least (000 averages 600)
     min_average: float = 200.0
-    #: integrated correlation times of the slowest of STEADY_QUANTITIES the steady part must
-    #: span before the SE targets are consulted (~10 jackknife blocks of 2 tau)
+    #: integrated correlation times of the slowest of granflow.analysis.channel's
+    #: STEADY_QUANTITIES the steady part must span before the SE targets are consulted (~10
+    #: jackknife blocks of 2 tau)
     min_taus: float = 20.0
     #: branches: the same, counted from the branch
     branch_t_max: float = 250.0
@@ -151,9 +153,6 @@ STIFF_KN = (1e6, 1e7)
 
 def _branches(parent: Point, kns: Iterable[float]) -> tuple[Point, ...]:
     return tuple(replace(parent, kn=k, parent=parent.key) for k in kns)
-
-
-SEEDS = tuple(range(1, REPLICAS + 1))
 
 
 def full_plan() -> Plan:
