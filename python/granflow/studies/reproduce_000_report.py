@@ -376,7 +376,7 @@ def stiffness_verdict(tab: pl.DataFrame) -> list[str]:
     The paper's statement holds where du/dx and T change more in the first than in the
     second and phi and u change little in both."""
     if tab.height == 0:
-        return ["No stiffness branches in this dataset."]
+        return ["No branch with a steady, stationary parent in this dataset."]
     out = []
     for (kn,), g0 in tab.group_by(["k_n"], maintain_order=True):
         # (each seed's branch against its own parent; their relative changes averaged)
@@ -583,7 +583,7 @@ def _read(out: Path, stem: str) -> pl.DataFrame:
 def _run_table(points: pl.DataFrame) -> pl.DataFrame:
     return points.sort(["kn", "W", "phi_bar", "seed"]).select(
         "W", "phi_bar", pl.col("kn").map_elements(lambda k: f"{k:.0e}", return_dtype=pl.String),
-        "seed", "n", "state", "converged", "t_start", "T_avg", "t_run",
+        "B", "H", "seed", "n", "state", "converged", "t_start", "T_avg", "t_run",
         pl.col("n_blocks").alias("blocks"),
         pl.col("prep_seconds").alias("prep (s)"), pl.col("wall_seconds").alias("wall (s)"))
 
@@ -593,9 +593,12 @@ Section = tuple[list[str], list[Path]]
 
 def stop_rule(plan: Any) -> str:
     """The plan's stop rule in words (reproduce_000's module docstring)."""
-    from .reproduce_000 import REPLICAS
-
-    return (f"Each point runs with {REPLICAS} seeds (quick plan: one), in stints of "
+    seeds: dict[tuple[Any, ...], int] = {}
+    for p in plan.points:
+        k = tuple(getattr(p, c) for c in POINT_BY)
+        seeds[k] = seeds.get(k, 0) + 1
+    k = min(seeds.values()) if seeds else 0
+    return (f"Each point runs with {k} seed{'s' if k != 1 else ''}, in stints of "
             f"{plan.stint:g} √(d/g). It stops when it is steady (the last half of |v_cm| "
             "steady or fluctuating by granflow.analysis.channel_profiles.flow_state), "
             "stationary (the thirds test of u_slip, u_max, the mean velocity and the mean σxx "
@@ -730,6 +733,8 @@ def _stiffness_section(points: pl.DataFrame, values: pl.DataFrame, profiles: pl.
     if not branches.height or not values.height:
         return [], []
     tab = stiffness_table(profiles, points)
+    if not tab.height:
+        return ["## Stiffness (fig. 10)", "", *stiffness_verdict(tab), ""], []
     fam = values.filter(pl.col("W") == branches["W"][0],
                         pl.col("phi_bar") == branches["phi_bar"][0]).sort("kn")
     fig = plot_profiles(fam, means, figdir / "fig10_stiffness.png",
@@ -912,10 +917,11 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
                        "a change without an error: whether it collapses is not tested.")
         out.append(f"- {r['quantity']} at φ̄ = {r['φ̄']:g}, W {r['widths']}: {said}, the "
                    f"unscaled quantity ∝ W^n with n = {r['exponent n (∝ W^n)']}: " + verdict)
-    widest = float(np.max(steady["W"].to_numpy())) if steady.height else math.nan
+    widest = (f"W = {float(np.max(steady['W'].to_numpy())):g}" if steady.height
+              else "none (no steady point)")
     out += ["", "Why the numbers differ from 000's, as far as this campaign can tell:", "",
             f"- Width: 000's ratio and collapse claims are for W = 60-150 (collapse only for "
-            f"W >= 100); the widest channel here is W = {widest:g}."
+            f"W >= 100); the widest steady channel here: {widest}."
             + (" u_max/u_slip (the per-width lines above) rises with W toward 1.37-1.40"
                + (f" (values; their SEs: {NED})." if any(ratios["SE"]) else ".")
                if ratios.height > 1 and bool(np.all(np.diff(
@@ -932,7 +938,10 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
             out.append(f"- Stiffness: against k_n = 1e5, u_slip is {du}; u_max/u_slip moves "
                        f"by at most {dr:.3f} (measured here: the k_n line above"
                        + ("" if known else f"; SEs {NED}") + ").")
-    out.append("- Depth and height: B = 10 and H = 20 instead of 40 and 60 + ΔH (the cost: "
+    bh = ", ".join(f"B = {b:g}, H = {h:g}" for b, h in
+                   points.select("B", "H").unique().sort("B", "H").iter_rows()) \
+        if points.height else "-"
+    out.append(f"- Depth and height: {bh} instead of B = 40 and H = 60 + ΔH (the cost: "
                "the particle count scales with B H). Not tested here; one W = 60 point at "
                "B = 40 is the next check (the paper-scale recipe below runs B = 40).")
     return out + [""]
