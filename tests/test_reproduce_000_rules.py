@@ -176,3 +176,18 @@ def test_the_report_regenerates_from_a_tiny_dataset(rows, tmp_path):
     # the coverage audit: 3 replicas give 3 pairs, 2 degrees of freedom
     cov = text.split("## Coverage audit")[1]
     assert "| u_slip | 1 | 3 | 2 |" in cov and "No pairs" not in cov
+
+
+def test_stiffness_zone_means_are_replica_means_with_both_ses():
+    from granflow.analysis.replicas import small_sample_factor
+    from granflow.studies.reproduce_000_report import stiffness_zone_means
+
+    rows = [{"W": 20.0, "phi_bar": 0.59, "kn": kn, "B": 10.0, "H": 20.0, "seed": s,
+             "zone": "dense", "n_bins": 6, "phi": 0.63, "phi_se": 5e-4, "u": 13.0 + 0.1 * s,
+             "u_se": 0.05, "abs_dudx": 0.02, "abs_dudx_se": 1e-3, "T": 0.014, "T_se": 1e-4}
+            for kn in (1e5, 1e6) for s in (1, 2, 3)]
+    t = stiffness_zone_means(pl.DataFrame(rows), 20.0, 0.59)
+    cell = t.filter(pl.col("quantity") == "u")["k_n = 1e+05 (bins)"][0]
+    between = small_sample_factor(3) * 0.1 / math.sqrt(3)
+    assert cell == (f"13.20 ± {between:.2f} (6) [within {0.05 / math.sqrt(3):.2g} / "
+                    f"between {between:.2g}]")

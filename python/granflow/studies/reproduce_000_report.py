@@ -228,6 +228,10 @@ def collapse(steady: pl.DataFrame) -> pl.DataFrame:
     return pl.DataFrame(rows)
 
 
+#: the zone table's quantities with an SE (their within and between parts are shown)
+ZONE_SE = ("xi_ad", "phi_plug", "l_c", "omega_ratio_shearing", "sigma_xx_mean")
+
+
 def zone_table(steady: pl.DataFrame) -> pl.DataFrame:
     """Zones (§3.2), plug phi, conduction length and Omega_z/omega_z per steady point."""
     rows = []
@@ -364,8 +368,11 @@ def stiffness_zone_means(zones: pl.DataFrame, W: float, phi_bar: float) -> pl.Da
             for r in z.iter_rows(named=True):
                 digits = 4 if q == "phi" else max(2, 3 - int(math.floor(math.log10(
                     max(abs(r[q]), 1e-12)))))
+                w, b = r[f"{q}_se_within"], r[f"{q}_se_between"]
+                parts = (f" [within {w:.2g} / between {b:.2g}]"
+                         if math.isfinite(w) and math.isfinite(b) else "")
                 row[f"k_n = {r['kn']:.0e} (bins)"] = f"{pm(r[q], r[f'{q}_se'], digits)} " \
-                    f"({r['n_bins']})"
+                    f"({r['n_bins']}){parts}"
             rows.append(row)
     return pl.DataFrame(rows)
 
@@ -700,6 +707,8 @@ def _zones_section(steady: pl.DataFrame, profiles: pl.DataFrame, means: pl.DataF
              "of du/dx (zero shear within its error): where that SE is "
              f"{NED}, xi_plug, φ plug and l_c are too.", "",
              md_table(zone_table(steady)), "",
+             "Their SEs within runs and between replicas (as for fig. 5):", "",
+             md_table(se_parts_table(steady, ZONE_SE)), "",
              "φ_ad from fig. 13 (000: the loose-zone coefficients diverge as "
              "(φ_ad - φ)^-1 with φ_ad = 0.59 ± 0.002): a fit to the loose-zone bins with an "
              "SE of every steady point, pooled:", "",
