@@ -602,8 +602,8 @@ def stop_rule(plan: Any) -> str:
     """The plan's stop rule in words (reproduce_000's module docstring)."""
     seeds: dict[tuple[Any, ...], int] = {}
     for p in plan.points:
-        k = tuple(getattr(p, c) for c in POINT_BY)
-        seeds[k] = seeds.get(k, 0) + 1
+        key = tuple(getattr(p, c) for c in POINT_BY)
+        seeds[key] = seeds.get(key, 0) + 1
     k = min(seeds.values()) if seeds else 0
     return (f"Each point runs with {k} seed{'s' if k != 1 else ''}, in stints of "
             f"{plan.stint:g} √(d/g). It stops when it is steady (the last half of |v_cm| "
