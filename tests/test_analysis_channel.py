@@ -285,7 +285,7 @@ def test_flow_state_vocabulary_keeps_the_committed_strings():
     # the strings the committed datasets hold: a member must keep its value
     assert [s.value for s in FlowState] == [
         "steady", "fluctuating", "flowing", "arrested", "accelerating", "decelerating",
-        "short", "runaway", "failed"]
+        "drifting", "short", "runaway", "failed"]
     s = FlowState.FLUCTUATING
     assert s == "fluctuating" and str(s) == f"{s}" == "fluctuating" and f"{s:>12}".strip() == s
     assert json.dumps({"state": s}) == '{"state": "fluctuating"}'

@@ -32,9 +32,11 @@ class FlowState(str, Enum):
       within its error): no flow.
     * ``ACCELERATING`` ("accelerating") / ``DECELERATING`` ("decelerating"): channel and cell;
       a significant drift, not a steady state.
-    * ``DRIFTING`` ("drifting"): cell; flowing, but a reported quantity drifts across the
-      steady part (its first and last thirds differ beyond their errors,
-      :func:`granflow.analysis.stats.stationarity`): not averaged, not fitted.
+    * ``DRIFTING`` ("drifting"): cell and channel; flowing (channel: steady or fluctuating by
+      its centre-of-mass velocity), but a reported quantity drifts across the steady part (its
+      first and last thirds differ beyond their errors,
+      :func:`granflow.analysis.stats.stationarity`; the channel's
+      :func:`granflow.analysis.channel.steady_check`): not averaged, not fitted.
 
     Recorded by campaigns (:mod:`granflow.studies`), not classified from data:
 

@@ -5,7 +5,9 @@ the model curves (3.1), (3.2), (B3), (B4), (B13), the velocity scaling of §3.1,
 Geometry, units and errors as in :mod:`granflow.analysis.channel_profiles` (the flow state and
 the profiles with jackknife errors, on which everything here is built): ``u`` is the velocity
 along the flow, ``xi`` the distance from the nearest wall; every derived quantity has a
-delete-one-block jackknife standard error over blocks of windows.
+delete-one-block jackknife standard error over blocks of windows (NaN, not enough data, from
+fewer than :data:`~granflow.analysis.stats.MIN_JACKKNIFE_BLOCKS` blocks). :func:`steady_check`
+tests the steady part for a slow drift and measures its correlation times.
 
 Columns used from the ``bins`` table (docs/columns.md): window, t0, t1, n_samples, bin, x_lo,
 x_hi, x, phi, u_y, w_z, T, sigma_xx, sigma_xy, Gamma, shear_production (missing optional
@@ -34,9 +36,13 @@ from .channel_profiles import (
 )
 from .estimate import Estimate
 from .stats import (
+    DRIFT_Z,
+    Stationarity,
+    blocking_many,
     jackknife_se,
     mean_se,
     ratio_se,
+    stationarity,
 )
 from .tables import FloatArray, TableLike, column, column_names, sample_interval
 
@@ -269,6 +275,9 @@ class Zones:
       plug (linear interpolation; none if phi stays >= phi_ad outside the wall zone, as for
       phi_bar = 0.62 in the paper).
 
+    Without an SE of du/dx (fewer than MIN_JACKKNIFE_BLOCKS blocks) the plug is undetermined:
+    no plug bins, ``xi_plug`` NaN.
+
     ``xi_plug`` is the plug edge (between the last plug bin and the first sheared one),
     ``xi_ad`` the dense/loose boundary (Estimate, jackknife SE) and ``xi_wall`` the outer edge
     of the wall zone.
@@ -308,19 +317,25 @@ def zones(
     nb = xi.size
     gd = tab["gamma_dot"].to_numpy()
     gd_se = tab["gamma_dot_se"].to_numpy()
-    sig = np.abs(gd) > z * np.where(np.isfinite(gd_se), gd_se, 0.0)
     wall = xi <= wall_width * prof.d
     n_wall = int(wall.sum())
-    # plug: from the centre outward until min_run consecutive bins show significant shear (j =
-    # innermost bin of that run; the run may be cut short by the wall zone)
     j = nb - 1
-    while j >= n_wall and not np.all(sig[max(j - min_run + 1, n_wall) : j + 1]):
-        j -= 1
-    plug_bins = np.arange(j + 1, nb, dtype=np.int64)
-    if plug_bins.size:
-        xi_plug = float(prof.xi_lo[plug_bins[0]])
+    if not np.any(np.isfinite(gd_se)):
+        # no SE of the shear rate (too few blocks): zero shear cannot be told from shear, the
+        # plug is undetermined (no plug bins, xi_plug NaN) and phi_ad is sought from the centre
+        plug_bins = np.zeros(0, dtype=np.int64)
+        xi_plug = float("nan")
     else:
-        xi_plug = float(prof.xi_hi[-1])
+        sig = np.abs(gd) > z * np.where(np.isfinite(gd_se), gd_se, 0.0)
+        # plug: from the centre outward until min_run consecutive bins show significant shear
+        # (j = innermost bin of that run; the run may be cut short by the wall zone)
+        while j >= n_wall and not np.all(sig[max(j - min_run + 1, n_wall) : j + 1]):
+            j -= 1
+        plug_bins = np.arange(j + 1, nb, dtype=np.int64)
+        if plug_bins.size:
+            xi_plug = float(prof.xi_lo[plug_bins[0]])
+        else:
+            xi_plug = float(prof.xi_hi[-1])
     i_from = j  # first sheared bin from the centre
     i_to = n_wall
 
@@ -488,6 +503,72 @@ def wall_friction(series: TableLike, t_start: float) -> Estimate:
     )
     r = ratio_se(num, den, sample_interval(t[keep]))
     return Estimate(abs(r.value), r.se)
+
+
+#: the reported quantities (one value per window of the bins table) whose drift across the
+#: steady part makes a channel run "drifting" and whose slowest correlation time sets a campaign
+#: run's minimum length: u_slip, u_max, the width-averaged velocity and the mean sigma_xx
+STEADY_QUANTITIES = ("u_slip", "u_max", "mean_velocity", "sigma_xx_mean")
+
+
+@dataclass(frozen=True)
+class SteadyCheck:
+    """Is a channel run's steady part stationary, and how long are its correlations?
+    (:func:`steady_check`)
+
+    Attributes
+    ----------
+    stationarity
+        The thirds test (:func:`granflow.analysis.stats.stationarity`) of STEADY_QUANTITIES
+        per window.
+    tau
+        Per quantity: its integrated correlation time (blocking of the window series), in
+        time units.
+    tau_max
+        The largest of ``tau`` (NaN if any is not finite).
+    """
+
+    stationarity: Stationarity
+    tau: dict[str, float]
+    tau_max: float
+
+    @property
+    def drifting(self) -> bool:
+        """Tested and not stationary: a quantity drifts across the steady part."""
+        return self.stationarity.tested and not self.stationarity.stationary
+
+
+def _window_quantities(prof: ChannelProfiles) -> dict[str, FloatArray]:
+    """STEADY_QUANTITIES of each steady window (as :func:`velocity_scaling` and
+    :func:`summary` define them on the averages)."""
+    width = prof.width_full
+
+    def fn(m: Mapping[str, FloatArray]) -> FloatArray:
+        q = prof.derived(m)
+        u = prof.sign * np.asarray(m["u_y"])
+        return np.array([_u_slip(q), _u_max(q), float(np.sum(u * width) / np.sum(width)),
+                         float(np.mean(q["sigma_xx"]))])
+
+    ser = prof.window_series(fn)
+    if ser.ndim != 2:
+        ser = np.zeros((0, len(STEADY_QUANTITIES)))
+    return {k: ser[:, j] for j, k in enumerate(STEADY_QUANTITIES)}
+
+
+@quiet
+def steady_check(prof: ChannelProfiles, *, z_max: float = DRIFT_Z) -> SteadyCheck:
+    """The thirds test and the correlation times of the STEADY_QUANTITIES of ``prof``'s steady
+    windows (:class:`SteadyCheck`): a run whose thirds differ by more than ``z_max`` of their
+    SEs drifts (the flow_state trend test sees only |v_cm| over the last half)."""
+    ser = _window_quantities(prof)
+    st = stationarity(ser, z_max=z_max)
+    n = min(v.size for v in ser.values())
+    tau = {k: math.nan for k in ser}
+    if n >= 2:
+        res = blocking_many(np.column_stack([ser[k] for k in ser]), dt=prof.window_dt)
+        tau = {k: float(t) for k, t in zip(ser, res.tau, strict=True)}
+    tmax = max(tau.values()) if all(math.isfinite(t) for t in tau.values()) else math.nan
+    return SteadyCheck(st, tau, tmax)
 
 
 @quiet

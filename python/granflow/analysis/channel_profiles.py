@@ -15,7 +15,9 @@ Errors: profiles are averaged over the windows of the steady part.  Each derived
 columns and its standard error comes from a delete-one-block jackknife over ``n_blocks``
 contiguous blocks of windows; the block length is at least the statistical inefficiency g (in
 windows) of the spatially averaged flow velocity, so that blocks are nearly independent
-(:func:`granflow.analysis.stats.choose_blocks`).
+(:func:`granflow.analysis.stats.choose_blocks`). A steady part shorter than MIN_JACKKNIFE_BLOCKS
+such blocks gives no SE (NaN: not enough data; :attr:`ChannelProfiles.enough_blocks` False)
+rather than one from a few degrees of freedom.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from granflow.states import FlowState
 from ._numerics import quiet
 from .binned import BinMatrix, bin_matrix, window_steady_start
 from .stats import (
+    MIN_JACKKNIFE_BLOCKS,
     SteadyStart,
     block_means,
     blocking,
@@ -189,6 +192,10 @@ class ChannelProfiles:
     (= Omega_z/(du_y/dx)), p_phi (B8: sigma_xx/T), mu_phi (B9: |sigma_xy|/(|du_y/dx| T^1/2)),
     D_phi (B10: Gamma/T^3/2), Gamma, production (= |shear_production|), gamma_over_sqrtT
     (= d |du_y/dx| / sqrt(T), fig. 9b).
+
+    ``windows`` holds the raw per-window means of every steady window (window x bin) and
+    ``window_dt`` the windows' duration, for :meth:`window_series` (stationarity, correlation
+    times). With fewer than MIN_JACKKNIFE_BLOCKS blocks every SE is NaN (``enough_blocks``).
     """
 
     xi: FloatArray
@@ -207,6 +214,8 @@ class ChannelProfiles:
     width_full: FloatArray
     full: dict[str, FloatArray] = field(repr=False)
     loo: dict[str, FloatArray] = field(repr=False)
+    windows: dict[str, FloatArray] = field(default_factory=dict, repr=False)
+    window_dt: float = math.nan
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     # ---- derived quantities ------------------------------------------------------------
@@ -259,10 +268,25 @@ class ChannelProfiles:
         mirror = q[::-1][:h]
         return 0.5 * (q[:h] + (-mirror if anti else mirror))
 
+    @quiet
+    def window_series(self, fn: Callable[[dict[str, FloatArray]], Any]) -> FloatArray:
+        """``fn(m)`` of every steady window's raw full-channel means ``m`` (as
+        :meth:`derived` takes them), in time order: an array (windows, ...) sampled every
+        ``window_dt``."""
+        n = next(iter(self.windows.values())).shape[0] if self.windows else 0
+        return np.asarray([fn({k: v[i] for k, v in self.windows.items()}) for i in range(n)],
+                          dtype=np.float64)
+
     # ---- jackknife ------------------------------------------------------------------------
+    @property
+    def enough_blocks(self) -> bool:
+        """Whether the jackknife has MIN_JACKKNIFE_BLOCKS blocks (else every SE is NaN)."""
+        return self.n_blocks >= MIN_JACKKNIFE_BLOCKS
+
     @quiet
     def estimate(self, fn: Callable[[dict[str, FloatArray]], Any]) -> tuple[Any, Any]:
-        """``(fn(derived()), jackknife SE)`` over the blocks of windows."""
+        """``(fn(derived()), jackknife SE)`` over the blocks of windows (NaN SE with fewer
+        than MIN_JACKKNIFE_BLOCKS blocks)."""
         value = fn(self.derived())
         reps = []
         for i in range(self.n_blocks):
@@ -329,7 +353,8 @@ def profiles(
         wall-0 half is used with a warning).
     n_blocks
         Number of jackknife blocks (default from the correlation of the window series, at most
-        ``max_blocks``).
+        ``max_blocks``); the values are computed from as few as 2, the SEs need
+        MIN_JACKKNIFE_BLOCKS.
     d, rho_p
         Particle diameter and density for I (B3) and the kinetic coefficients.
     """
@@ -393,6 +418,15 @@ def profiles(
         width_full=width,
         full=full,
         loo=loo,
+        windows={k: np.asarray(v) for k, v in bm.data.items()},
+        window_dt=_window_dt(bm),
     )
+
+
+def _window_dt(bm: BinMatrix) -> float:
+    """The windows' duration (their median t1 - t0; else the spacing of their mid times)."""
+    if np.all(np.isfinite(bm.t0)) and np.all(np.isfinite(bm.t1)) and bm.t0.size:
+        return float(np.median(bm.t1 - bm.t0))
+    return float(np.median(np.diff(bm.t_mid))) if bm.t_mid.size > 1 else math.nan
 
 

@@ -10,12 +10,22 @@ A *point* is one channel run, (W, phi_bar, k_n, seed) at depth B and periodic he
 prepared by fill and release (:class:`granflow.scenes.channel.Channel`) and run in stints of
 ``stint`` time units. It stops when
 
-* it is **steady**: the flow state of the last half of its centre-of-mass velocity is steady
-  or fluctuating (:func:`granflow.analysis.channel_profiles.flow_state`), the steady part (from
-  MSER on |vcm_y|) spans at least ``min_average`` time units, and the jackknife SEs of u_slip
-  and u_max are within ``se_target`` of their values; or
+* it is **steady** and long enough (:func:`long_enough`), and only then are the SE targets
+  consulted (:func:`converged`): the flow state of the last half of its centre-of-mass velocity
+  is steady or fluctuating (:func:`granflow.analysis.channel_profiles.flow_state`); its steady
+  part (from MSER on |vcm_y|) is stationary (the thirds test of u_slip, u_max, the mean velocity
+  and the mean sigma_xx per window, :func:`granflow.analysis.channel.steady_check`: a drifting
+  run is ``drifting`` and goes on), spans at least ``min_average`` time units and ``min_taus``
+  integrated correlation times of the slowest of those quantities; then the jackknife SEs of
+  u_slip and u_max must be within ``se_target`` of their values (an SE from fewer than
+  MIN_JACKKNIFE_BLOCKS blocks is NaN and meets no target). The minimum length keeps a run from
+  stopping because its SE estimate happened to dip (optional stopping biases every SE small);
+  or
 * it is **arrested** (|vcm_y| < 1e-3 sqrt(g d) over the last half) at two stints running; or
-* it reached ``t_max`` (its last state is recorded: accelerating, decelerating, ...).
+* it reached ``t_max`` (its last state is recorded: accelerating, decelerating, drifting, ...).
+
+Every point of the full and paper plans runs with REPLICAS independent seeds; the report's
+value of a point is their mean (:func:`granflow.analysis.replicas.replica_mean`).
 
 The stiffness points (fig. 10) are *branches*: the state of a finished k_n = 1e5 point, run on
 at k_n = 1e6 and 1e7 (dt = 1.2e-4 sqrt(1e6/k_n), ~t_c/11, as 000 §2 at 1e6) until steady by
@@ -45,6 +55,7 @@ import pyarrow as pa
 
 from granflow.analysis.estimate import Estimate
 from granflow.material import MATERIAL_000
+from granflow.states import FlowState
 
 from ._campaign import Study, done_keys, fmt, run_points
 from ._campaign import reanalyse as engine_reanalyse
@@ -59,6 +70,16 @@ SCALING = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "residual_31", "
 PROFILE = ("xi", "xi_lo", "xi_hi", "u", "gamma_dot", "phi", "T", "sigma_xx", "sigma_xy", "w_z",
            "mu", "I", "omega_ratio", "production", "Gamma", "gamma_over_sqrtT", "p_phi",
            "mu_phi", "D_phi")
+#: the reported quantities (columns of points.parquet, each with its ``_se``): the value of a
+#: point over its replicas and the coverage audit
+REPORTED = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "mean_velocity_ratio",
+            "wall_friction", "sigma_xx_mean")
+#: a point's fields less the seed (and the parent key, which names its parent's seed): the
+#: replicas of a point share them
+POINT_BY = ("W", "phi_bar", "kn", "B", "H")
+#: independent seeds of every point of the full and paper plans, and those seeds
+REPLICAS = 3
+SEEDS = tuple(range(1, REPLICAS + 1))
 #: sample interval in time units (~100 steps at k_n = 1e5) and samples per window
 SAMPLE_DT = 0.04
 WINDOW = 50
@@ -108,6 +129,10 @@ class Plan:
     t_max: float = 1500.0
     #: steady averaging time a point needs at least (000 averages 600)
     min_average: float = 200.0
+    #: integrated correlation times of the slowest of granflow.analysis.channel's
+    #: STEADY_QUANTITIES the steady part must span before the SE targets are consulted (~10
+    #: jackknife blocks of 2 tau)
+    min_taus: float = 20.0
     #: branches: the same, counted from the branch
     branch_t_max: float = 250.0
     branch_min_average: float = 100.0
@@ -132,25 +157,28 @@ def _branches(parent: Point, kns: Iterable[float]) -> tuple[Point, ...]:
 
 def full_plan() -> Plan:
     """W = 20, 40, 60 x phi_bar = 0.59, 0.60, 0.61 at B = 10, H = 20, k_n = 1e5; the
-    stiffness branches at W = 20, phi_bar = 0.59 (k_n = 1e7 costs 10x the steps); then
-    W = 100 at the three phi_bar."""
-    pts = tuple(Point(w, p) for w in WIDTHS for p in PHIS)
-    return Plan("full", pts, _branches(Point(*STIFF_AT), STIFF_KN),
-                later=tuple(Point(100.0, p) for p in PHIS))
+    stiffness branches at W = 20, phi_bar = 0.59 (k_n = 1e7 costs 10x the steps), each from
+    its own seed's parent; then W = 100 at the three phi_bar. REPLICAS seeds of every point,
+    one after another (a campaign stopped part way leaves complete replica sets)."""
+    pts = tuple(Point(w, p, seed=s) for w in WIDTHS for p in PHIS for s in SEEDS)
+    branches = tuple(b for s in SEEDS for b in _branches(Point(*STIFF_AT, seed=s), STIFF_KN))
+    return Plan("full", pts, branches,
+                later=tuple(Point(100.0, p, seed=s) for p in PHIS for s in SEEDS))
 
 
 def paper_plan() -> Plan:
     """000's own scale: W = 60, 80, 100, 125, 150 x phi_bar = 0.59-0.62 at B = 40, H = 60,
-    k_n = 1e6, to t = 2600 (steady after 2000, 600 averaged), 3 seeds."""
+    k_n = 1e6, to t = 2600 (steady after 2000, 600 averaged), REPLICAS seeds."""
     pts = tuple(Point(w, p, seed=s, kn=1e6, B=40.0, H=60.0)
-                for s in (1, 2, 3) for w in (60.0, 80.0, 100.0, 125.0, 150.0)
+                for s in SEEDS for w in (60.0, 80.0, 100.0, 125.0, 150.0)
                 for p in (0.59, 0.60, 0.61, 0.62))
     return Plan("paper", pts, t_max=2600.0, min_average=600.0)
 
 
 def quick_plan() -> Plan:
     """Minutes on two cores: W = 12 at phi_bar = 0.58 and 0.59, B = 5, H = 8, a short average
-    at 3 % SE, and one k_n = 1e6 branch."""
+    at 3 % SE, and one k_n = 1e6 branch; one seed (a test of the machinery, not a
+    measurement)."""
     pts = (Point(12.0, 0.58, B=5.0, H=8.0), Point(12.0, 0.59, B=5.0, H=8.0))
     return Plan("quick", pts, _branches(pts[0], (1e6,)), se_target=0.03, stint=25.0,
                 t_max=150.0, min_average=40.0, branch_t_max=60.0, branch_min_average=20.0)
@@ -227,12 +255,34 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table) -> dic
             z[k], z[f"{k}_se"] = e.value, e.se
         row["zone_rows"].append(z)
     row["se_rows"] = _se_rows(point, bins, prof.t_start, float(t[-1]))
-    t_max, min_average = plan.limits(point)
-    row["converged"] = bool(
-        row["T_avg"] >= min_average
-        and all(math.isfinite(row[f"{k}_se"]) and row[f"{k}_se"] <= plan.se_target * abs(row[k])
-                for k in ("u_slip", "u_max")))
+    chk = ach.steady_check(prof)
+    row.update(drift_z=chk.stationarity.max_abs_z, drift_quantity=chk.stationarity.worst,
+               drift_tested=chk.stationarity.tested, tau_max=chk.tau_max)
+    if chk.drifting:
+        row["state"] = FlowState.DRIFTING.value
+    row["converged"] = converged(row, plan, point)
     return row
+
+
+def long_enough(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
+    """Whether a steady run is stationary (tested by the thirds test and not drifting) and its
+    steady part spans the plan's ``min_average`` and ``min_taus`` correlation times of its
+    slowest reported quantity (``tau_max``): the minimum length before any SE target is
+    consulted."""
+    state = row.get("state", "")
+    t_avg = row.get("T_avg", 0.0)
+    tau = row.get("tau_max", math.nan)
+    return (state in FlowState._value2member_map_ and FlowState(state).is_steady
+            and bool(row.get("drift_tested")) and math.isfinite(tau)
+            and t_avg >= plan.limits(point)[1] and t_avg >= plan.min_taus * tau)
+
+
+def converged(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
+    """The stop rule (module docstring): :func:`long_enough`, then the SE targets of u_slip
+    and u_max (a NaN SE, from too few jackknife blocks, meets none)."""
+    return long_enough(row, plan, point) and all(
+        math.isfinite(row[f"{k}_se"]) and row[f"{k}_se"] <= plan.se_target * abs(row[k])
+        for k in ("u_slip", "u_max"))
 
 
 ROW_TABLES = {"profile_rows": "profiles", "zone_rows": "zones", "se_rows": "se_vs_time"}

@@ -6,14 +6,21 @@
 * :mod:`.stationarity` — the thirds test: is a steady part stationary (no slow drift)?
 * :mod:`.shared_mode` — the SE of a mean through a slow mode shared with a reference series.
 * :mod:`.se_time` — SE against averaging time and its extrapolation.
-* :mod:`.block_jackknife` — the delete-one-block jackknife.
+* :mod:`.block_jackknife` — the delete-one-block jackknife (no SE from fewer than
+  MIN_JACKKNIFE_BLOCKS blocks).
 
 Everything here works on *samples* of a time series (one row per sample of a ``series`` table, or
 one window of a ``bins`` table) and never on particles. A value with its error is an
 :class:`granflow.analysis.estimate.Estimate`.
 """
 
-from .block_jackknife import block_means, choose_blocks, jackknife, jackknife_se
+from .block_jackknife import (
+    MIN_JACKKNIFE_BLOCKS,
+    block_means,
+    choose_blocks,
+    jackknife,
+    jackknife_se,
+)
 from .fp_blocking import (
     DEFAULT_ALPHA,
     DEFAULT_MIN_BLOCKS,
@@ -46,6 +53,7 @@ __all__ = [
     "DRIFT_Z",
     "FIT_MIN_BLOCKS",
     "FIT_TAUS",
+    "MIN_JACKKNIFE_BLOCKS",
     "REGRESSION_BLOCKS",
     "SECOND_MODE_PENALTY",
     "BlockingArrays",

@@ -1,0 +1,193 @@
+"""The error rules of the 000 campaign (issue 34), fast, on synthetic channel tables: no
+jackknife SE from fewer than 10 blocks, a drifting channel is "drifting" and a stationary one
+is not, no stop before the minimum length, 3 seeds per point, and the report regenerated from
+a tiny dataset with replica means, "not enough data" and the coverage audit."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import polars as pl
+import pyarrow as pa
+import pytest
+from granflow.analysis import channel as ch
+from granflow.analysis import channel_profiles as cp
+from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS, jackknife_se
+from granflow.studies import reproduce_000 as rp
+from granflow.studies.reproduce_000_report import refuse_few_blocks, write_report
+
+W = 20.0
+#: window duration and sample interval of the synthetic tables (the campaign's)
+WIN, DT = 2.0, 0.04
+
+
+def channel_tables(nw: int = 150, drift: float = 0.0, seed: int = 0) -> tuple[pa.Table, pa.Table]:
+    """``bins`` and ``series`` of a channel whose flow grows by the fraction ``drift`` over
+    the run (0: stationary), with independent noise in every window."""
+    rng = np.random.default_rng(seed)
+    edges = np.concatenate([[0.0], np.arange(1.5, W - 1.5 + 0.01, 1.0), [W]])
+    x_lo, x_hi = edges[:-1], edges[1:]
+    x = 0.5 * (x_lo + x_hi)
+    nb = x.size
+    xi = np.minimum(x, W - x)
+    u = ch.velocity_profile_31(xi, 3.0, 4.2, 4.0)
+    phi = 0.63 - 0.1 * np.exp(-xi / 3.0)
+    T = 0.01 + 0.5 * np.exp(-xi)
+    sxy = -0.6 * (x - W / 2)
+    cols: dict[str, list[np.ndarray]] = {}
+
+    def add(k: str, v: Any) -> None:
+        cols.setdefault(k, []).append(np.broadcast_to(np.asarray(v), (nb,)).copy())
+
+    for w in range(nw):
+        f = 1.0 + drift * w / nw
+        uy = -u * f + 0.02 * rng.normal(size=nb)
+        for k, v in (("window", w), ("t0", WIN * w), ("t1", WIN * (w + 1)), ("n_samples", 50),
+                     ("bin", np.arange(nb)), ("x_lo", x_lo), ("x_hi", x_hi), ("x", x)):
+            add(k, v)
+        add("phi", phi + 0.001 * rng.normal(size=nb))
+        add("u_y", uy)
+        add("w_z", 0.5 * np.gradient(uy, x))
+        add("T", T * (1 + 0.01 * rng.normal(size=nb)))
+        add("sigma_xx", 20.0 * (1 + 0.01 * rng.normal(size=nb)))
+        add("sigma_xy", sxy + 0.01 * rng.normal(size=nb))
+        add("Gamma", 5.0 * T**1.5 * (1 + 0.01 * rng.normal(size=nb)))
+        add("shear_production", sxy * np.gradient(uy, x))
+    tab = {k: np.concatenate(v) for k, v in cols.items()}
+    for k in ("window", "bin", "n_samples"):
+        tab[k] = tab[k].astype(np.int64)
+    t = np.arange(round(nw * WIN / DT)) * DT
+    v = 3.5 * (1.0 + drift * t / (nw * WIN)) * (1 + 0.001 * rng.normal(size=t.size))
+    series = pa.table({"step": np.arange(t.size), "t": t, "vcm_x": 0 * t, "vcm_y": -v,
+                       "vcm_z": 0 * t})
+    return pa.table(tab), series
+
+
+def test_no_jackknife_se_from_fewer_than_10_blocks():
+    assert MIN_JACKKNIFE_BLOCKS == 10
+    reps = np.random.default_rng(1).normal(size=10)
+    assert math.isnan(jackknife_se(0.0, reps[:9])) and math.isfinite(jackknife_se(0.0, reps))
+    bins, series = channel_tables()
+    few = cp.profiles(bins, series, n_blocks=5)
+    enough = cp.profiles(bins, series, n_blocks=10)
+    assert not few.enough_blocks and enough.enough_blocks
+    assert few.table()["u_se"].is_nan().all() and enough.table()["u_se"].is_finite().all()
+    # the values do not need the SEs; the section 3 numbers and the plug do
+    s = ch.summary(bins, series, n_blocks=4)
+    assert math.isfinite(s["u_slip"].value) and math.isnan(s["u_slip"].se)
+    assert math.isnan(s["sigma_xx_mean"].se) and math.isnan(s["zones"]["xi_plug"])
+    assert math.isfinite(ch.summary(bins, series)["u_slip"].se)
+
+
+def test_the_report_refuses_the_committed_few_block_ses():
+    pts = pl.DataFrame({"W": [40.0, 20.0], "phi_bar": [0.59, 0.6], "kn": [1e5, 1e5],
+                        "B": [10.0, 10.0], "H": [20.0, 20.0], "seed": [1, 1],
+                        "n_blocks": [2, 13], "sigma_xx_mean": [29.5, 19.0],
+                        "sigma_xx_mean_se": [0.0007, 0.17], "xi_plug": [20.0, 8.5],
+                        "phi_plug": [0.62, 0.645], "phi_plug_se": [0.0002, 0.0001]})
+    d = refuse_few_blocks(pts)
+    assert math.isnan(d["sigma_xx_mean_se"][0]) and d["sigma_xx_mean_se"][1] == 0.17
+    assert math.isnan(d["xi_plug"][0]) and d["xi_plug"][1] == 8.5
+    assert d["sigma_xx_mean"].to_list() == [29.5, 19.0]
+
+
+@pytest.fixture(scope="module")
+def rows():
+    """point_row of three replicas of a stationary point and of a drifting one."""
+    plan = rp.full_plan()
+    out = {}
+    for s in (1, 2, 3):
+        p = rp.Point(20.0, 0.59, seed=s)
+        out[p] = rp.point_row(p, plan, *channel_tables(seed=s))
+    p = rp.Point(40.0, 0.6, seed=1)
+    out[p] = rp.point_row(p, plan, *channel_tables(drift=0.05, seed=7))
+    return out
+
+
+def test_a_drifting_channel_is_drifting_and_a_stationary_one_is_not(rows):
+    for p, r in rows.items():
+        assert r["drift_tested"], r["drift_z"]
+        if p.W == 40.0:
+            assert r["state"] == "drifting" and r["drift_z"] > 3.0 and not r["converged"]
+        else:
+            assert r["state"] in ("steady", "fluctuating") and r["drift_z"] <= 3.0
+            assert math.isfinite(r["tau_max"]) and r["n_blocks"] >= MIN_JACKKNIFE_BLOCKS
+
+
+def test_no_stop_before_the_minimum_length():
+    plan, p = rp.full_plan(), rp.Point(20.0, 0.59)
+    row = {"state": "steady", "drift_tested": True, "T_avg": 300.0, "tau_max": 10.0,
+           "u_slip": 10.0, "u_slip_se": 0.01, "u_max": 13.0, "u_max_se": 0.01}
+    assert rp.converged(row, plan, p)
+    # SEs on target, but 300 < 20 x 20 correlation times: it runs on
+    assert not rp.converged({**row, "tau_max": 20.0}, plan, p)
+    assert not rp.converged({**row, "T_avg": 150.0, "tau_max": 1.0}, plan, p)  # min_average
+    assert not rp.converged({**row, "state": "drifting"}, plan, p)
+    assert not rp.converged({**row, "drift_tested": False}, plan, p)
+    assert not rp.converged({**row, "u_slip_se": math.nan}, plan, p)  # too few blocks
+
+
+@pytest.mark.parametrize("make", [rp.full_plan, rp.paper_plan])
+def test_every_point_has_three_seeds(make):
+    plan = make()
+    allp = [*plan.points, *plan.branches, *plan.later]
+    seeds: dict[tuple[Any, ...], set[int]] = {}
+    for p in allp:
+        seeds.setdefault((*(getattr(p, k) for k in rp.POINT_BY), bool(p.parent)),
+                         set()).add(p.seed)
+    assert rp.REPLICAS >= 3 and all(len(s) >= rp.REPLICAS for s in seeds.values())
+    assert len({p.key for p in allp}) == len(allp)
+    # a branch starts from its own seed's parent
+    assert all(b.parent.endswith(f"_s{b.seed}") for b in plan.branches)
+
+
+def test_the_report_regenerates_from_a_tiny_dataset(rows, tmp_path):
+    pts, extra = [], {"profile_rows": [], "zone_rows": [], "se_rows": []}
+    for r in rows.values():
+        r = dict(r)
+        for k in extra:
+            extra[k] += r.pop(k)
+        r.update(n=4000, steps=1_000_000, prep_seconds=10.0, wall_seconds=100.0,
+                 t_run=r["t_end"], phi_bar_achieved=r["phi_bar"], settle_time=1.0)
+        pts.append(r)
+    # a fourth point with one replica whose SEs rest on 2 blocks (as the committed W = 60)
+    few = {**pts[0], "W": 60.0, "n_blocks": 2}
+    pts.append(few)
+    extra["profile_rows"] += [{**r, "W": 60.0} for r in extra["profile_rows"][:11]]
+    pl.from_dicts(pts, infer_schema_length=None).write_parquet(tmp_path / "points.parquet")
+    for k, stem in rp.ROW_TABLES.items():
+        pl.from_dicts(extra[k], infer_schema_length=None).write_parquet(
+            tmp_path / f"{stem}.parquet")
+    text = write_report(tmp_path, tmp_path / "r.md", rp.full_plan(), rp.paper_plan()
+                        ).read_text()
+    assert "§3.3" not in text and "§3.2" in text
+    # the replicas' mean: 3 replicas, within and between SEs both shown
+    assert "| 20 | 0.59 | 3 |" in text
+    u = [r for r in rows.values() if r["W"] == 20.0]
+    between = np.std([r["u_slip"] for r in u], ddof=1) / math.sqrt(3) * 1.32
+    assert f"/ {between:.2g} |" in text
+    # the 2-block point: values, no SE
+    assert "not enough data (2 blocks)" in text
+    # the drifting point is listed and left out
+    assert "Drifting runs (left out of the tables and fits): W = 40" in text
+    assert "| 40 | 0.6 |" not in text.split("## Fig. 5")[1]
+    # the coverage audit: 3 replicas give 3 pairs, 2 degrees of freedom
+    cov = text.split("## Coverage audit")[1]
+    assert "| u_slip | 1 | 3 | 2 |" in cov and "No pairs" not in cov
+
+
+def test_stiffness_zone_means_are_replica_means_with_both_ses():
+    from granflow.analysis.replicas import small_sample_factor
+    from granflow.studies.reproduce_000_report import stiffness_zone_means
+
+    rows = [{"W": 20.0, "phi_bar": 0.59, "kn": kn, "B": 10.0, "H": 20.0, "seed": s,
+             "zone": "dense", "n_bins": 6, "phi": 0.63, "phi_se": 5e-4, "u": 13.0 + 0.1 * s,
+             "u_se": 0.05, "abs_dudx": 0.02, "abs_dudx_se": 1e-3, "T": 0.014, "T_se": 1e-4}
+            for kn in (1e5, 1e6) for s in (1, 2, 3)]
+    t = stiffness_zone_means(pl.DataFrame(rows), 20.0, 0.59)
+    cell = t.filter(pl.col("quantity") == "u")["k_n = 1e+05 (bins)"][0]
+    between = small_sample_factor(3) * 0.1 / math.sqrt(3)
+    assert cell == (f"13.20 ± {between:.2f} (6) [within {0.05 / math.sqrt(3):.2g} / "
+                    f"between {between:.2g}]")
