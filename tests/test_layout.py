@@ -196,13 +196,13 @@ def test_scenes_have_one_home():
 
 def study_violations(graph: dict[str, set[str]]) -> list[str]:
     """Imports from one study module of granflow.studies to another: a study reaches others'
-    code only through the shared engine, granflow.studies._campaign; a study's report module
-    (``X_report``) may import its study ``X``, and its study may import it."""
+    code only through the shared engine, granflow.studies._campaign; a study's report and
+    figure modules (``X_report``, ``X_figures``) may import its study ``X``, and it them."""
     def study(mod: str) -> str | None:
         parts = mod.split(".")
         if len(parts) < 3 or parts[:2] != ["granflow", "studies"] or parts[2] == "_campaign":
             return None
-        return parts[2].removesuffix("_report")
+        return parts[2].removesuffix("_report").removesuffix("_figures")
 
     out = []
     for mod, targets in sorted(graph.items()):

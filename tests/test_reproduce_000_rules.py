@@ -16,7 +16,7 @@ from granflow.analysis import channel as ch
 from granflow.analysis import channel_profiles as cp
 from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS, jackknife_se
 from granflow.studies import reproduce_000 as rp
-from granflow.studies.reproduce_000_report import refuse_few_blocks, write_report
+from granflow.studies.reproduce_000_report import POINT_BY, refuse_few_blocks, write_report
 
 W = 20.0
 #: window duration and sample interval of the synthetic tables (the campaign's)
@@ -135,7 +135,7 @@ def test_every_point_has_three_seeds(make):
     allp = [*plan.points, *plan.branches, *plan.later]
     seeds: dict[tuple[Any, ...], set[int]] = {}
     for p in allp:
-        seeds.setdefault((*(getattr(p, k) for k in rp.POINT_BY), bool(p.parent)),
+        seeds.setdefault((*(getattr(p, k) for k in POINT_BY), bool(p.parent)),
                          set()).add(p.seed)
     assert rp.REPLICAS >= 3 and all(len(s) >= rp.REPLICAS for s in seeds.values())
     assert len({p.key for p in allp}) == len(allp)

@@ -60,8 +60,8 @@ def _plan(name: str, points: Iterable[Point], stint_steps: int,
                 max_shear={n: s * f for n, s in max_shear_steps.items()}, **kw)
 
 
-#: independent seeds per calibration point of the full plan (issue 34: a point's SE from the
-#: spread between replicas as well as from each run's own)
+#: independent seeds per calibration point of the full plan (a point's SE from the spread
+#: between replicas as well as from each run's own)
 SEEDS = (1, 2, 3)
 
 

@@ -70,13 +70,6 @@ SCALING = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "residual_31", "
 PROFILE = ("xi", "xi_lo", "xi_hi", "u", "gamma_dot", "phi", "T", "sigma_xx", "sigma_xy", "w_z",
            "mu", "I", "omega_ratio", "production", "Gamma", "gamma_over_sqrtT", "p_phi",
            "mu_phi", "D_phi")
-#: the reported quantities (columns of points.parquet, each with its ``_se``): the value of a
-#: point over its replicas and the coverage audit
-REPORTED = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "mean_velocity_ratio",
-            "wall_friction", "sigma_xx_mean")
-#: a point's fields less the seed (and the parent key, which names its parent's seed): the
-#: replicas of a point share them
-POINT_BY = ("W", "phi_bar", "kn", "B", "H")
 #: independent seeds of every point of the full and paper plans, and those seeds
 REPLICAS = 3
 SEEDS = tuple(range(1, REPLICAS + 1))

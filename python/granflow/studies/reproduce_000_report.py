@@ -3,7 +3,7 @@ against W and phi_bar beside the paper's statements, figures 4-10, the stiffness
 zone, error against run time, the coverage audit, the cost of each piece and the paper-scale
 recipe.
 
-Error rules (issue 34): a point's value is the mean of its steady, stationary replicas with the
+Error rules: a point's value is the mean of its steady, stationary replicas with the
 larger of the within-run and between-replica SEs (:func:`granflow.analysis.replicas.replica_mean`,
 both shown); no SE from fewer than MIN_JACKKNIFE_BLOCKS jackknife blocks ("not enough data");
 drifting points are listed and left out of the tables and fits."""
@@ -26,7 +26,6 @@ from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS
 from granflow.states import FlowState
 
 from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
-from .reproduce_000 import POINT_BY, PROFILE, REPORTED
 
 #: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
 RATIO_PAPER = (1.37, 1.40)
@@ -43,6 +42,14 @@ PLUG_QUANTITIES = ("xi_plug", "phi_plug", "l_c")
 SIGNIFICANT, AGREE = 3.0, 2.0
 MARKERS = {0.59: "D", 0.6: "v", 0.61: "^", 0.62: "o"}
 
+
+#: the reported quantities (columns of points.parquet, each with its ``_se``): the value of a
+#: point over its replicas and the coverage audit
+REPORTED = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "mean_velocity_ratio",
+            "wall_friction", "sigma_xx_mean")
+#: a point's fields less the seed (and the parent key, which names its parent's seed): the
+#: replicas of a point share them
+POINT_BY = ("W", "phi_bar", "kn", "B", "H")
 
 def refuse_few_blocks(points: pl.DataFrame, table: pl.DataFrame | None = None) -> pl.DataFrame:
     """``table`` (default ``points``) with every ``*_se`` of a run whose steady part gave fewer
@@ -492,7 +499,8 @@ def mean_profiles(profiles: pl.DataFrame) -> pl.DataFrame:
     per bin ``xi`` every profile quantity's replica mean and SE (replica_mean)."""
     if not profiles.height:
         return profiles
-    qs = [c for c in PROFILE[3:] if c in profiles.columns]
+    # (the profile quantities: the columns with an SE beside them)
+    qs = [c for c in profiles.columns if f"{c}_se" in profiles.columns and c not in POINT_BY]
     d = profiles.with_columns(*(pl.col(c).cast(pl.Float64) for c in
                                 (*qs, *(f"{q}_se" for q in qs))))
     return replica_mean(d, [*POINT_BY, "xi"], qs).sort([*POINT_BY, "xi"])

@@ -311,7 +311,7 @@ def median_steps(points: pl.DataFrame) -> float:
     return float(flow["shear_steps"].median()) if flow.height else math.nan  # type: ignore[arg-type]
 
 
-#: the band of the coverage audit's rms z that counts as honest SEs (issue 34)
+#: the band of the coverage audit's rms z that counts as honest SEs
 COVERAGE_BAND = (0.7, 1.4)
 
 
