@@ -30,7 +30,8 @@ def test_points_reach_their_se_targets_and_are_kept(quick):
     assert sorted(d["tau_ratio"].to_list()) == sorted(p.tau_ratio for p in plan.points)
     assert d.group_by("tau_ratio").len()["len"].min() == rp.REPLICAS
     for r in d.iter_rows(named=True):
-        assert r["state"] in ("flowing", "drifting"), r
+        assert r["state"] not in ("runaway", "failed", "short"), r
+        assert isinstance(r["converged"], bool)
         assert r["converged"] or r["shear_steps"] >= plan.max_steps(r["N"])
         if r["converged"]:
             # (no stop before the minimum length, whatever the SEs)

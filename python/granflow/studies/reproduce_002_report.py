@@ -347,7 +347,7 @@ def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) ->
                                         "drift_quantity", "drift_z", "I", "phi"),
                            {"drift_z": ".1f", "I": ".4f", "phi": ".4f"})]
     short = points.filter((pl.col("state") == "flowing")
-                          & ~pl.col("converged").fill_null(False))
+                          & ~pl.col("converged").cast(pl.Boolean).fill_null(False))
     if short.height:
         tc = ([(pl.col("T_avg_tc")).alias("T (t_c)"),
                (pl.col("tau_max") * pl.col("T_avg_tc") / pl.col("T_avg")).alias("tau_max (t_c)")]
@@ -408,7 +408,8 @@ def curves_section(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitR
     """The headline verdict: our curves against 002's (:func:`curve_comparison`)."""
     cmp = curve_comparison(pool, fits, n)
     if not cmp.height:
-        return ["No mu_s of this dataset has a law that 002 gives in full (mu_s = 0 and 0.3)."]
+        return ["No law that 002 gives in full (mu_s = 0 and 0.3) could be fitted here (a "
+                "fit needs at least four usable points of one mu_s)."]
     agree = cmp.filter(pl.col("verdict") == "agrees").height
     return [f"**{agree} of {cmp.height} curves agree** with 002's. Where 002 gives all of a "
             "law's constants (mu_s = 0 and 0.3, §4), our fitted curve against the paper's over "

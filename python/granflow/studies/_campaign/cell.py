@@ -179,15 +179,16 @@ def long_enough(row: Mapping[str, Any], plan: Plan) -> bool:
     ``plan.min_strain`` of shear: the minimum length before any SE target is consulted."""
     t_avg = row.get("T_avg", 0.0)  # (kernel time, as tau_max; T_avg_tc in t_c)
     tau = row.get("tau_max", math.nan)
-    return (row["state"] == "flowing" and math.isfinite(tau)
-            and row.get("T_avg_tc", 0.0) >= plan.min_length and t_avg >= plan.min_taus * tau
-            and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
+    return bool(row["state"] == "flowing" and math.isfinite(tau)
+                and row.get("T_avg_tc", 0.0) >= plan.min_length
+                and t_avg >= plan.min_taus * tau
+                and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
 
 
 def converged(row: Mapping[str, Any], plan: Plan) -> bool:
     """The stop rule (module docstring): :func:`long_enough`, then the SE targets."""
     return long_enough(row, plan) and all(
-        math.isfinite(row.get(f"{k}_se", math.nan)) and row[f"{k}_se"] <= t * abs(row[k])
+        bool(math.isfinite(row.get(f"{k}_se", math.nan)) and row[f"{k}_se"] <= t * abs(row[k]))
         for k, t in plan.targets().items())
 
 
