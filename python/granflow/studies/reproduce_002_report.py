@@ -55,7 +55,7 @@ def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame) -> s
     if curves.height:
         lines.append(
             f"* Of the {curves.height} curves 002 gives in full, {curves.height - bad.height} "
-            "agree with ours within the errors over the common I range"
+            "agree with ours within the errors over our fitted I range"
             + (": " + ", ".join(f"mu_s = {r['mu_s']:g} {r['law']} differs by up to "
                                 f"{r['largest |ours - paper|']:.3f} (at I = {r['at I']:.2g})"
                                 for r in bad.iter_rows(named=True)) if bad.height else "")
@@ -73,8 +73,9 @@ def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame) -> s
         "curve differ; the headline comparison above is of the curves, with the fits' "
         "covariance.",
         "* **Not compared here.** Whether LAMMPS gives the same offsets on one protocol is "
-        "measured in issue 35, not in this dataset; the reading of t_c (collision against "
-        "printed) moves I by -1.9 % +- 1.6 % and mu1, phi not at all within their errors at "
+        "not measured in this dataset (a rate-controlled comparison is planned); the "
+        "reading of t_c (collision against printed) moves I by -1.9 % +- 1.6 % and mu1, phi "
+        "not at all within their errors at "
         "mu_s = 0.3, tau/p = 0.45, N = 500 (`python benchmarks/tc_reading.py --N 500 --steps "
         "300000 --seeds 1 2 3 4`, docs/cell.md). 002 reports tau/p up to 1.2; from the "
         "compacted start no steady state exists above the runaway ratios listed below, so "
