@@ -18,7 +18,7 @@ Control (``--control``): the softest k_n again with dt x 0.9, the same physics o
 much as the k_n pairs, the block SE underestimates the run-to-run scatter (slow wandering of the
 plug) and the k_n comparison cannot resolve a stiffness effect of that size. The comparison is
 made with the automatic number of blocks and with ``--n-blocks`` (default 10, the fewest the
-jackknife gives an SE from: granflow.analysis.stats.MIN_JACKKNIFE_BLOCKS) long blocks.
+jackknife gives an SE from: granflow.analysis.stats.MIN_SE_BLOCKS) long blocks.
 
     python benchmarks/channel_stiffness.py [--kn 1e5 1e6 1e7] [--T 400] [--discard 60]
         [--W 16 --H 10 --B 6 --phi 0.59] [--control] [--n-blocks 10] [--out benchmarks/out]
@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 from granflow.analysis import channel as ach
-from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS, steady_state_start
+from granflow.analysis.stats import MIN_SE_BLOCKS, steady_state_start
 from granflow.scenes.channel import Channel
 
 DT_1E6 = 1.2e-4  # 000 §2: dt = 1.2e-4 sqrt(d/g) at k_n = 1e6
@@ -203,9 +203,9 @@ def main() -> None:
     ap.add_argument("--force", action="store_true", help="rerun k_n whose tables exist")
     ap.add_argument("--control", action="store_true",
                     help="also the softest k_n with dt x 0.9 (null comparison)")
-    ap.add_argument("--n-blocks", type=int, default=MIN_JACKKNIFE_BLOCKS,
+    ap.add_argument("--n-blocks", type=int, default=MIN_SE_BLOCKS,
                     help="long blocks for the second SE (fewer than "
-                    f"{MIN_JACKKNIFE_BLOCKS}: no SE)")
+                    f"{MIN_SE_BLOCKS}: no SE)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ import math
 
 import polars as pl
 import pytest
-from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS
+from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.studies import reproduce_000 as rp
 from granflow.studies._campaign import point_of
 from granflow.studies.reproduce_000_report import write_report
@@ -45,7 +45,7 @@ def test_points_stop_by_the_stated_criterion(quick):
         assert 1.0 < r["u_max_over_u_slip"] < 2.0
         # an SE from fewer than 10 jackknife blocks is not given
         assert math.isfinite(r["u_max_over_u_slip_se"]) == (
-            r["n_blocks"] >= MIN_JACKKNIFE_BLOCKS)
+            r["n_blocks"] >= MIN_SE_BLOCKS)
         assert r["prep_seconds"] >= 0 and r["wall_seconds"] > r["prep_seconds"]
     # a denser channel flows slower (000 fig. 5)
     base = d.filter(pl.col("kn") == 1e5).sort("phi_bar")

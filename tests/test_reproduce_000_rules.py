@@ -14,7 +14,7 @@ import pyarrow as pa
 import pytest
 from granflow.analysis import channel as ch
 from granflow.analysis import channel_profiles as cp
-from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS, jackknife_se
+from granflow.analysis.stats import MIN_SE_BLOCKS, jackknife_se
 from granflow.studies import reproduce_000 as rp
 from granflow.studies.reproduce_000_report import POINT_BY, refuse_few_blocks, write_report
 
@@ -66,7 +66,7 @@ def channel_tables(nw: int = 150, drift: float = 0.0, seed: int = 0) -> tuple[pa
 
 
 def test_no_jackknife_se_from_fewer_than_10_blocks():
-    assert MIN_JACKKNIFE_BLOCKS == 10
+    assert MIN_SE_BLOCKS == 10
     reps = np.random.default_rng(1).normal(size=10)
     assert math.isnan(jackknife_se(0.0, reps[:9])) and math.isfinite(jackknife_se(0.0, reps))
     bins, series = channel_tables()
@@ -113,7 +113,7 @@ def test_a_drifting_channel_is_drifting_and_a_stationary_one_is_not(rows):
             assert r["state"] == "drifting" and r["drift_z"] > 3.0 and not r["converged"]
         else:
             assert r["state"] in ("steady", "fluctuating") and r["drift_z"] <= 3.0
-            assert math.isfinite(r["tau_max"]) and r["n_blocks"] >= MIN_JACKKNIFE_BLOCKS
+            assert math.isfinite(r["tau_max"]) and r["n_blocks"] >= MIN_SE_BLOCKS
 
 
 def test_no_stop_before_the_minimum_length():

@@ -6,7 +6,7 @@ Geometry, units and errors as in :mod:`granflow.analysis.channel_profiles` (the 
 the profiles with jackknife errors, on which everything here is built): ``u`` is the velocity
 along the flow, ``xi`` the distance from the nearest wall; every derived quantity has a
 delete-one-block jackknife standard error over blocks of windows (NaN, not enough data, from
-fewer than :data:`~granflow.analysis.stats.MIN_JACKKNIFE_BLOCKS` blocks). :func:`steady_check`
+fewer than :data:`~granflow.analysis.stats.MIN_SE_BLOCKS` blocks). :func:`steady_check`
 tests the steady part for a slow drift and measures its correlation times.
 
 Columns used from the ``bins`` table (docs/columns.md): window, t0, t1, n_samples, bin, x_lo,
@@ -275,7 +275,7 @@ class Zones:
       plug (linear interpolation; none if phi stays >= phi_ad outside the wall zone, as for
       phi_bar = 0.62 in the paper).
 
-    Without an SE of du/dx (fewer than MIN_JACKKNIFE_BLOCKS blocks) the plug is undetermined:
+    Without an SE of du/dx (fewer than MIN_SE_BLOCKS blocks) the plug is undetermined:
     no plug bins, ``xi_plug`` NaN.
 
     ``xi_plug`` is the plug edge (between the last plug bin and the first sheared one),

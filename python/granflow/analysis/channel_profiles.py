@@ -15,7 +15,7 @@ Errors: profiles are averaged over the windows of the steady part.  Each derived
 columns and its standard error comes from a delete-one-block jackknife over ``n_blocks``
 contiguous blocks of windows; the block length is at least the statistical inefficiency g (in
 windows) of the spatially averaged flow velocity, so that blocks are nearly independent
-(:func:`granflow.analysis.stats.choose_blocks`). A steady part shorter than MIN_JACKKNIFE_BLOCKS
+(:func:`granflow.analysis.stats.choose_blocks`). A steady part shorter than MIN_SE_BLOCKS
 such blocks gives no SE (NaN: not enough data; :attr:`ChannelProfiles.enough_blocks` False)
 rather than one from a few degrees of freedom.
 """
@@ -36,7 +36,7 @@ from granflow.states import FlowState
 from ._numerics import quiet
 from .binned import BinMatrix, bin_matrix, window_steady_start
 from .stats import (
-    MIN_JACKKNIFE_BLOCKS,
+    MIN_SE_BLOCKS,
     SteadyStart,
     block_means,
     blocking,
@@ -195,7 +195,7 @@ class ChannelProfiles:
 
     ``windows`` holds the raw per-window means of every steady window (window x bin) and
     ``window_dt`` the windows' duration, for :meth:`window_series` (stationarity, correlation
-    times). With fewer than MIN_JACKKNIFE_BLOCKS blocks every SE is NaN (``enough_blocks``).
+    times). With fewer than MIN_SE_BLOCKS blocks every SE is NaN (``enough_blocks``).
     """
 
     xi: FloatArray
@@ -280,13 +280,13 @@ class ChannelProfiles:
     # ---- jackknife ------------------------------------------------------------------------
     @property
     def enough_blocks(self) -> bool:
-        """Whether the jackknife has MIN_JACKKNIFE_BLOCKS blocks (else every SE is NaN)."""
-        return self.n_blocks >= MIN_JACKKNIFE_BLOCKS
+        """Whether the jackknife has MIN_SE_BLOCKS blocks (else every SE is NaN)."""
+        return self.n_blocks >= MIN_SE_BLOCKS
 
     @quiet
     def estimate(self, fn: Callable[[dict[str, FloatArray]], Any]) -> tuple[Any, Any]:
         """``(fn(derived()), jackknife SE)`` over the blocks of windows (NaN SE with fewer
-        than MIN_JACKKNIFE_BLOCKS blocks)."""
+        than MIN_SE_BLOCKS blocks)."""
         value = fn(self.derived())
         reps = []
         for i in range(self.n_blocks):
@@ -354,7 +354,7 @@ def profiles(
     n_blocks
         Number of jackknife blocks (default from the correlation of the window series, at most
         ``max_blocks``); the values are computed from as few as 2, the SEs need
-        MIN_JACKKNIFE_BLOCKS.
+        MIN_SE_BLOCKS.
     d, rho_p
         Particle diameter and density for I (B3) and the kinetic coefficients.
     """

@@ -18,7 +18,7 @@ prepared by fill and release (:class:`granflow.scenes.channel.Channel`) and run 
   run is ``drifting`` and goes on), spans at least ``min_average`` time units and ``min_taus``
   integrated correlation times of the slowest of those quantities; then the jackknife SEs of
   u_slip and u_max must be within ``se_target`` of their values (an SE from fewer than
-  MIN_JACKKNIFE_BLOCKS blocks is NaN and meets no target). The minimum length keeps a run from
+  MIN_SE_BLOCKS blocks is NaN and meets no target). The minimum length keeps a run from
   stopping because its SE estimate happened to dip (optional stopping biases every SE small);
   or
 * it is **arrested** (|vcm_y| < 1e-3 sqrt(g d) over the last half) at two stints running; or

@@ -5,7 +5,7 @@ recipe.
 
 Error rules: a point's value is the mean of its steady, stationary replicas with the
 larger of the within-run and between-replica SEs (:func:`granflow.analysis.replicas.replica_mean`,
-both shown); no SE from fewer than MIN_JACKKNIFE_BLOCKS jackknife blocks ("not enough data");
+both shown); no SE from fewer than MIN_SE_BLOCKS jackknife blocks ("not enough data");
 drifting points are listed and left out of the tables and fits."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, sc
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import save_figure
 from granflow.analysis.replicas import replica_mean
-from granflow.analysis.stats import MIN_JACKKNIFE_BLOCKS
+from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
 from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
@@ -33,7 +33,7 @@ RATIO_PAPER = (1.37, 1.40)
 PHI_PLUG_PAPER = 0.63
 PHI_PLUG_PRINTED = (0.625, 0.635)
 #: what the report writes where a quantity has no SE: its steady part gave fewer than
-#: MIN_JACKKNIFE_BLOCKS jackknife blocks
+#: MIN_SE_BLOCKS jackknife blocks
 NED = "not enough data"
 #: the quantities whose SE rests on where the plug ends (the plug edge needs the SE of du/dx:
 #: without it the analysis leaves the plug undetermined, granflow.analysis.channel.zones)
@@ -53,14 +53,14 @@ POINT_BY = ("W", "phi_bar", "kn", "B", "H")
 
 def refuse_few_blocks(points: pl.DataFrame, table: pl.DataFrame | None = None) -> pl.DataFrame:
     """``table`` (default ``points``) with every ``*_se`` of a run whose steady part gave fewer
-    than MIN_JACKKNIFE_BLOCKS jackknife blocks set to NaN, and (points) its plug quantities too:
+    than MIN_SE_BLOCKS jackknife blocks set to NaN, and (points) its plug quantities too:
     the rule the analysis now applies (granflow.analysis.stats.jackknife_se), applied to a
     dataset written before it. The runs' block counts are the ``n_blocks`` column of
     points.parquet (the blocks behind every SE of the run: its profiles, zone means and
     section 3 numbers come from the one jackknife); ``table``'s rows are matched to their run
     by the point's fields."""
     key = [*POINT_BY, "seed"]
-    few = points.filter(pl.col("n_blocks").fill_null(0) < MIN_JACKKNIFE_BLOCKS).select(key)
+    few = points.filter(pl.col("n_blocks").fill_null(0) < MIN_SE_BLOCKS).select(key)
     d = points if table is None else table
     if not d.height or not few.height:
         return d
@@ -109,7 +109,7 @@ def _se_note(r: dict[str, Any]) -> str:
     """Where a point's SEs come from: its replicas and blocks, or NED."""
     nb = r.get("n_blocks")
     k = r.get("replicas", 1)
-    if nb is None or nb < MIN_JACKKNIFE_BLOCKS:
+    if nb is None or nb < MIN_SE_BLOCKS:
         return f"{NED} ({nb} blocks)"
     return f"{k} replica{'s' if k > 1 else ''}, ≥ {nb} blocks"
 
@@ -622,7 +622,7 @@ def stop_rule(plan: Any) -> str:
             f"{plan.min_average:g} √(d/g) and {plan.min_taus:g} integrated correlation times "
             "of the slowest of those quantities; only then are the SE targets consulted "
             f"(the jackknife SEs of u_slip and u_max within {plan.se_target:.0%}; no SE from "
-            f"fewer than {MIN_JACKKNIFE_BLOCKS} blocks). Or it arrests for two stints, or "
+            f"fewer than {MIN_SE_BLOCKS} blocks). Or it arrests for two stints, or "
             f"reaches t = {plan.t_max:g}.")
 
 
@@ -648,7 +648,7 @@ def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
                   "after the minimum averaging time, without a minimum in correlation times "
                   "(optional stopping: its SEs are biased small). It is re-run under the rule "
                   "above in a later issue (000 at the paper's widths). Below, its SEs from "
-                  f"fewer than {MIN_JACKKNIFE_BLOCKS} jackknife blocks (`blocks`) are refused "
+                  f"fewer than {MIN_SE_BLOCKS} jackknife blocks (`blocks`) are refused "
                   f"({NED}).", ""]
     lines += ["States: " + ", ".join(f"{k} {v}" for k, v in sorted(
                   points["state"].value_counts().iter_rows())) + ". " + _drift_line(points)
@@ -811,7 +811,7 @@ def _se_section(se: pl.DataFrame, figdir: Path) -> Section:
                   "the fluctuations shorter than its blocks; the flow wanders more slowly "
                   "than that, so every SE of this dataset, the whole part's included, is an "
                   "underestimate of unknown size. The minimum length in correlation times, "
-                  f"the {MIN_JACKKNIFE_BLOCKS}-block rule and the replicas' spread "
+                  f"the {MIN_SE_BLOCKS}-block rule and the replicas' spread "
                   "(the rule above) are the remedy; this dataset predates them.", ""]
     elif all(math.isfinite(g) for g in got):
         lines += [f"The SE from the first {q['fraction']:g} of a steady part is "
@@ -842,7 +842,7 @@ def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
              "z = (x_a - x_b)/√(SE_a² + SE_b²); the rms of z over the pairs is 1 for honest "
              "SEs, with its 95 % interval (chi-squared, one degree of freedom per replica "
              f"beyond the first). The command: `{cmd}` (this table applies the "
-             f"{MIN_JACKKNIFE_BLOCKS}-block rule to the dataset first).", "",
+             f"{MIN_SE_BLOCKS}-block rule to the dataset first).", "",
              md_table(tab, {"rms_z": ".2f", "rms_z_lo": ".2f", "rms_z_hi": ".2f",
                             "max_abs_z": ".1f"}), ""]
     pairs = int(tab["pairs"].sum()) if tab.height else 0

@@ -7,7 +7,7 @@
 * :mod:`.shared_mode` — the SE of a mean through a slow mode shared with a reference series.
 * :mod:`.se_time` — SE against averaging time and its extrapolation.
 * :mod:`.block_jackknife` — the delete-one-block jackknife (no SE from fewer than
-  MIN_JACKKNIFE_BLOCKS blocks).
+  MIN_SE_BLOCKS blocks).
 
 Everything here works on *samples* of a time series (one row per sample of a ``series`` table, or
 one window of a ``bins`` table) and never on particles. A value with its error is an
@@ -15,7 +15,7 @@ one window of a ``bins`` table) and never on particles. A value with its error i
 """
 
 from .block_jackknife import (
-    MIN_JACKKNIFE_BLOCKS,
+    MIN_SE_BLOCKS,
     block_means,
     choose_blocks,
     jackknife,
@@ -53,7 +53,7 @@ __all__ = [
     "DRIFT_Z",
     "FIT_MIN_BLOCKS",
     "FIT_TAUS",
-    "MIN_JACKKNIFE_BLOCKS",
+    "MIN_SE_BLOCKS",
     "REGRESSION_BLOCKS",
     "SECOND_MODE_PENALTY",
     "BlockingArrays",

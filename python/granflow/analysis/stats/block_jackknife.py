@@ -2,7 +2,7 @@
 
 A jackknife SE from ``nb`` blocks has ``nb - 1`` degrees of freedom: from 2 blocks it is one
 difference, and the 000 campaign's 2-block SEs came out 200-500x smaller than their
-neighbours'. No SE is given from fewer than MIN_JACKKNIFE_BLOCKS blocks (NaN: not enough data).
+neighbours'. No SE is given from fewer than MIN_SE_BLOCKS blocks (NaN: not enough data).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import numpy as np
 from .._numerics import quiet
 from ..tables import FloatArray
 
-#: fewest blocks a jackknife SE may rest on (fewer: NaN, not enough data); 10 blocks give the SE
-#: a ~25 % uncertainty of its own
-MIN_JACKKNIFE_BLOCKS = 10
+#: fewest blocks an SE may rest on (fewer: NaN, not enough data): the jackknife's blocks and
+#: the cell campaign's blocks of 2 tau; 10 blocks give the SE a ~25 % uncertainty of its own
+MIN_SE_BLOCKS = 10
 
 
 def choose_blocks(n: int, g: float = 1.0, max_blocks: int = 32) -> tuple[int, int]:
@@ -31,7 +31,7 @@ def choose_blocks(n: int, g: float = 1.0, max_blocks: int = 32) -> tuple[int, in
 
 @quiet
 def jackknife_se(full: Any, replicates: Sequence[Any],
-                 min_blocks: int = MIN_JACKKNIFE_BLOCKS) -> Any:
+                 min_blocks: int = MIN_SE_BLOCKS) -> Any:
     """Delete-one-block jackknife SE: ``sqrt((nb-1)/nb * sum_i (theta_i - mean theta)^2)``.
 
     ``full`` is the estimate from all data (returned unchanged by the caller); works for
@@ -78,7 +78,7 @@ def jackknife(
     fn: Callable[[FloatArray], Any], full_input: FloatArray, loo_inputs: FloatArray
 ) -> tuple[Any, Any]:
     """Evaluate ``fn`` on the full-sample mean and on each leave-one-block-out mean and return
-    ``(value, jackknife SE)`` (NaN SE from fewer than MIN_JACKKNIFE_BLOCKS blocks)."""
+    ``(value, jackknife SE)`` (NaN SE from fewer than MIN_SE_BLOCKS blocks)."""
     value = fn(full_input)
     reps = [fn(loo_inputs[i]) for i in range(loo_inputs.shape[0])]
     return value, jackknife_se(value, reps)

@@ -32,6 +32,7 @@ import numpy as np
 import polars as pl
 import pyarrow as pa
 
+from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.errors import ParameterError
 from granflow.material import MATERIAL_000, MATERIAL_002, DtRule, Material
 
@@ -68,9 +69,6 @@ SE_TARGETS = {"mu1": 1.0, "phi": 1.0, "I": 3.0}
 #: the reported quantities whose slowest correlation time sets a run's minimum length (phi's,
 #: the barostat's volume mode, is 100-900 t_c at N = 2000, I's ~10-900, mu1's ~3)
 MIN_LENGTH_COLUMNS = ("I", "phi", "mu1", "mu2")
-#: fewest blocks of 2 tau a quantity's SE may rest on; with fewer its SE is NaN (not enough
-#: data) rather than a small number
-MIN_SE_BLOCKS = 10.0
 
 
 @dataclass(frozen=True)
@@ -150,6 +148,13 @@ def _steady_series(series: pa.Table, t0: float, observables: Iterable[str]) -> p
     return s.filter(pl.col("t") > t0)
 
 
+def enough_blocks(t_avg: float, tau: float) -> bool:
+    """Whether an averaging time ``t_avg`` holds the MIN_SE_BLOCKS blocks of 2 ``tau`` an SE
+    may rest on (:data:`granflow.analysis.stats.MIN_SE_BLOCKS`); fewer: the SE is NaN (not
+    enough data) rather than a small number."""
+    return math.isfinite(tau) and t_avg >= 2.0 * MIN_SE_BLOCKS * tau
+
+
 def _analyse(s: pl.DataFrame, observables: Iterable[str] = OBSERVABLES) -> dict[str, Any]:
     from granflow.analysis import rheology as rh
 
@@ -161,10 +166,8 @@ def _analyse(s: pl.DataFrame, observables: Iterable[str] = OBSERVABLES) -> dict[
                            "drift_quantity": res.state.drift_quantity}
     for r in res.stats.iter_rows(named=True):
         o, tau = r["observable"], r["tau"]
-        # (an SE from fewer than MIN_SE_BLOCKS blocks of 2 tau is not reported)
-        enough = math.isfinite(tau) and t_avg >= 2.0 * MIN_SE_BLOCKS * tau
         out[o], out[f"{o}_tau"] = r["mean"], tau
-        out[f"{o}_se"] = r["se"] if enough else math.nan
+        out[f"{o}_se"] = r["se"] if enough_blocks(t_avg, tau) else math.nan
     taus = [out.get(f"{c}_tau", math.nan) for c in MIN_LENGTH_COLUMNS if f"{c}_tau" in out]
     out["tau_max"] = max(taus) if taus and all(map(math.isfinite, taus)) else math.nan
     return out
@@ -209,8 +212,7 @@ def _se_rows(point: Point, s: pl.DataFrame, t_start: float,
         for r in tab.iter_rows(named=True):
             row = rows.setdefault(r["fraction"], {**asdict(point), "fraction": r["fraction"],
                                                   "T_avg": r["T"]})
-            enough = math.isfinite(tau) and r["T"] >= 2.0 * MIN_SE_BLOCKS * tau
-            row[f"{col}_se"] = r["se"] if enough else math.nan
+            row[f"{col}_se"] = r["se"] if enough_blocks(r["T"], tau) else math.nan
     return list(rows.values())
 
 
