@@ -223,8 +223,9 @@ def cell_observe(cell: Any) -> dict[str, float]:
     G = np.outer(d3h, d1h) - np.outer(d1h, d3h)
     tiny = 1e-300
     beta = abs(float(np.sum(W * G)) / (gd * float(np.sum(G * G)))) if gd > tiny else 0.0
-    sD = float(np.sum(sp * D))
-    D2 = D @ D - np.trace(D @ D) / 3 * np.eye(3)
+    sD = float(np.sum((sp - p * np.eye(3)) * D))  # deviatoric projection (cell_obs.rs)
+    Dv = D - np.trace(D) / 3 * np.eye(3)  # (2.4)'s tensors from D's deviatoric part
+    D2 = Dv @ Dv - np.trace(Dv @ Dv) / 3 * np.eye(3)
     DW = D @ W - W @ D
     ok = gd > tiny and p > tiny and abs(sD) > tiny
     mu1 = sD / (2 * gd * p) if ok else 0.0

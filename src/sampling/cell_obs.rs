@@ -206,8 +206,19 @@ pub fn cell_row(inp: &CellInput) -> Result<Vec<(&'static str, f64)>> {
     } else {
         0.0
     };
-    let s_d = np_sum(&sp.component_mul(&d));
-    let dd = d * d;
+    // 002 (4.1), eta1 |D| + kappa1 = sigma:D / (2|D|), takes tr D = 0 (§2.1: I and D are
+    // then orthogonal and p I drops out). Under the barostat tr D (= d ln phi/dt) is zero only
+    // in the mean, and sigma:D as printed adds p tr D / (2|D|) to every sample: the same mean,
+    // but a breathing term with a bounded integral that blocking cannot see as such (mu1's SE
+    // came out twice its seed-to-seed spread: benchmarks/NOTES.md, "mu1, mu2 and the breathing").
+    // The deviatoric projection (sigma - pI):D is (2.4)'s eta1/kappa1 part for any tr D; mu2
+    // (below), N0 and N1 (5.3, 5.4) share it.
+    let sdev = sp - M3::from_diagonal_element(p);
+    let s_d = np_sum(&sdev.component_mul(&d));
+    // (2.4)'s second-order tensor of the isochoric D: built from D's deviatoric part, for the
+    // reason above (D^2 of a breathing D carries 2 tr(D)/3 D_dev, the same kind of term)
+    let ddev = d - M3::from_diagonal_element(np_trace(&d) / 3.0);
+    let dd = ddev * ddev;
     let d2 = dd - M3::from_diagonal_element(np_trace(&dd) / 3.0);
     let dw = d * w - w * d;
     let ok = gd > TINY && p > TINY && s_d.abs() > TINY;
@@ -690,6 +701,15 @@ mod tests {
         let gd: f64 = (0.5 * (2.0 * (g / 2.0) * (g / 2.0) + 3e-6)).sqrt();
         assert!(close(get(&row, "shear_rate"), gd, 1e-13));
         assert!(close(get(&row, "beta"), g / (2.0 * gd), 1e-12));
+        // ... and leaves the shear stress (sigma - pI):D = -tau g (the stress of -tau): the
+        // breathing's p tr D (3p 1e-3, more than tau g here) is the pressure's, not mu1's
+        assert!(close(get(&row, "mu1"), -tau * g / (2.0 * gd * p), 1e-12));
+        // likewise mu2: (2.4)'s D^2 term from D's deviatoric part, sp:D2 = -sz g^2/4 as before
+        assert!(close(
+            get(&row, "mu2"),
+            -1.5 * sz * g * g / (4.0 * gd * gd * p),
+            1e-12
+        ));
     }
 
     #[test]

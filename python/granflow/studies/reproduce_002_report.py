@@ -339,7 +339,13 @@ def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) ->
         + ", ".join(f"{k} within {t:.0%}" for k, t in plan.targets().items())
         + f" of its mean); at most {plan.max_steps(n):,} steps of shear. No SE rests on fewer "
         "than 10 blocks of 2 tau: a quantity with less data has none, and its point is not "
-        "fitted."]
+        "fitted.", "",
+        "**mu1 and mu2** project the deviatoric stress on D and on (2.4)'s D^2 tensor built "
+        "from D's deviatoric part, where 002 prints (4.1) and (4.3) with D for an isochoric "
+        "flow: the barostat's breathing (tr D = d ln phi/dt, zero only in the mean) otherwise "
+        "adds terms of zero mean to every sample that inflate the SEs (docs/cell.md; "
+        "`python benchmarks/cell_breathing.py OUT` compares both forms on a campaign's "
+        "series)."]
     drift = points.filter(pl.col("state") == "drifting")
     if drift.height:
         lines += ["", f"{drift.height} runs still drifted at the end of their budget; they are "
