@@ -45,6 +45,9 @@ pub trait Simulation: Send + Sync {
     fn domain_observables(&self) -> Vec<(String, f64)>;
     /// Change the imposed stress of a stress-controlled domain (an error for any other).
     fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> Result<()>;
+    /// Drive a cell at an imposed xy shear rate, its normal stress (sigma_yy if `gradient`,
+    /// else the pressure) held at `p_ext` (an error for any other domain).
+    fn set_rate(&mut self, rate: f64, gradient: bool, p_ext: f64) -> Result<()>;
     /// Pair contacts of the last force evaluation: (id_i, id_j, r_ij = x_i - x_j (minimum
     /// image), force on i), in list order.
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)>;
@@ -312,6 +315,9 @@ impl<F: Form, T: Friction, D: Domain, W: Walls<F, T>, G: Body> Simulation
     }
     fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> Result<()> {
         self.domain.set_stress(p_ext, tau_ext)
+    }
+    fn set_rate(&mut self, rate: f64, gradient: bool, p_ext: f64) -> Result<()> {
+        self.domain.set_rate(rate, gradient, p_ext)
     }
     fn contacts(&self) -> Vec<(u32, u32, crate::V3, crate::V3)> {
         self.contact_list()

@@ -7,11 +7,12 @@ from __future__ import annotations
 import granflow as gf
 import numpy as np
 import pytest
-from granflow.scenes import Channel, PeriodicGas, Scene, ShearCell
+from granflow.scenes import Channel, PeriodicGas, RateCell, Scene, ShearCell
 
 FACTORIES = {
     "gas": lambda: PeriodicGas(L=6.0, sample_every=50, seed=2),
     "cell": lambda: ShearCell(N=60, sample_every=50, seed=2),
+    "rate_cell": lambda: RateCell(N=60, sample_every=50, seed=2),
     "channel": lambda: Channel(W=6, H=8, B=3.5, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4,
                                sample_every=50, window=4),
 }
@@ -74,7 +75,7 @@ def test_one_vocabulary_across_scenes(scene_kind):
     # the shared parameters have the same names and meanings in every scene: they reach the
     # kernel's law, and parameters() and summary() report them under the same keys
     cls = type(FACTORIES[scene_kind]())
-    base = {"gas": {"L": 6.0}, "cell": {"N": 60},
+    base = {"gas": {"L": 6.0}, "cell": {"N": 60}, "rate_cell": {"N": 60},
             "channel": {"W": 6, "H": 8, "B": 3.5, "kn": 1e5}}[scene_kind]
     sc = cls(**base, **SHARED, dt=1e-4, sample_every=50, seed=3)
     sc.prepare()

@@ -386,6 +386,13 @@ impl Sim {
     fn set_stress(&mut self, p_ext: f64, tau_ext: f64) -> PyResult<()> {
         self.inner.set_stress(p_ext, tau_ext).py_err()
     }
+    /// Drive a cell at the xy shear rate `rate` (L_xy = dv_x/dy >= 0) from the next step on,
+    /// holding sigma_yy (`gradient`, the x and z lengths fixed) or the pressure at `p_ext`
+    /// (ParameterError for a rate < 0 or not finite, p_ext <= 0, or another domain).
+    #[pyo3(signature = (rate, p_ext, gradient = false))]
+    fn set_rate(&mut self, rate: f64, p_ext: f64, gradient: bool) -> PyResult<()> {
+        self.inner.set_rate(rate, gradient, p_ext).py_err()
+    }
     /// Time integral of the wall forces since the start ((n_walls, 3)).
     fn wall_impulse(&self) -> Vec<[f64; 3]> {
         self.inner

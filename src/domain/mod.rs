@@ -125,6 +125,15 @@ pub trait Domain: Clone + Send + Sync + 'static {
             "a stress-controlled cell (this domain has no imposed stress)",
         ))
     }
+    /// Drive a cell at an imposed xy shear rate with its normal stress (sigma_yy if
+    /// `gradient`, else the pressure) held at `p_ext` (the cell; other domains refuse).
+    fn set_rate(&mut self, _rate: f64, _gradient: bool, _p_ext: f64) -> Result<()> {
+        Err(Error::param(
+            "domain",
+            Self::NAME,
+            "a cell (this domain has no imposed rate)",
+        ))
+    }
     /// Named scalar observables of the domain itself (e.g. a cell's velocity gradient).
     fn observables(&self) -> Vec<(String, f64)> {
         Vec::new()

@@ -22,6 +22,14 @@
 //! coordinates only change through v'), forces, half-kick of the momenta, new internal stress,
 //! half-kick of P_g.
 //!
+//! Rate control (`drive_at_rate`, the protocol LAMMPS can run): the
+//! xy entry of P_g is held at W_g rate (L_xy = rate, so dH_xy/dt = rate H_yy plus the breathing
+//! L_xx H_xy), xz and yz at zero, and only the normal stress is driven as above: the pressure
+//! (`Normal::Pressure`, the isotropic diagonal) or sigma_yy alone (`Normal::Gradient`, with
+//! L_xx = L_zz = 0: LAMMPS's `fix deform/pressure` on y). The barostat's W_g sets how fast the
+//! normal stress is followed, not its mean: the time integral of the drive is the change of
+//! P_g, so the mean internal stress equals the target in any steady state.
+//!
 //! Flips: when |H_xy| > L_x/2 (or |H_xz| > L_x/2, |H_yz| > L_y/2) the cell is replaced by the
 //! equivalent lattice (LAMMPS's flip): Cartesian positions, velocities and contact histories are
 //! unchanged, image counters are remapped, the pair list is rebuilt. Contact forces do not
@@ -34,6 +42,22 @@ use crate::{M3, V3};
 
 const MAGIC: f64 = 6_755_399_441_055_744.0;
 
+/// Which normal stress a rate-controlled cell holds at p_ext.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Normal {
+    /// The mean pressure tr(sigma)/3, with an isotropic dilation (as the stress-controlled cell).
+    Pressure,
+    /// sigma_yy, the gradient direction's, with the flow and vorticity lengths fixed.
+    Gradient,
+}
+
+/// How the cell is driven: an imposed stress (002) or an imposed xy shear rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Control {
+    Stress,
+    Rate { rate: f64, normal: Normal },
+}
+
 #[derive(Clone, Debug)]
 pub struct PrCell {
     pub h: M3,
@@ -44,6 +68,7 @@ pub struct PrCell {
     pub wg: f64,
     pub p_ext: f64,
     pub tau_ext: f64,
+    pub control: Control,
     /// Driving of the last completed step, V (sigma_int - sigma_ext) (projected).
     drive: M3,
     /// Internal stress of the last completed step (contact part, kinetic part).
@@ -100,6 +125,7 @@ impl PrCell {
             wg,
             p_ext,
             tau_ext,
+            control: Control::Stress,
             drive: M3::zeros(),
             sigma_c: M3::zeros(),
             sigma_k: M3::zeros(),
@@ -146,12 +172,69 @@ impl PrCell {
         self.sigma_k = kin / v;
         let sig = self.sigma_c + self.sigma_k;
         let sym = 0.5 * (sig + sig.transpose());
-        let mut g = v * (sym - self.sigma_ext());
-        let piso = v * (sym.trace() / 3.0 - self.p_ext);
-        for k in 0..3 {
-            g[(k, k)] = piso;
+        self.drive = match self.control {
+            Control::Stress => {
+                let mut g = v * (sym - self.sigma_ext());
+                let piso = v * (sym.trace() / 3.0 - self.p_ext);
+                for k in 0..3 {
+                    g[(k, k)] = piso;
+                }
+                upper(&g)
+            }
+            // (once a step on a 3x3 matrix: the particle passes are the same for both)
+            Control::Rate { normal, .. } => {
+                let mut g = M3::zeros();
+                match normal {
+                    Normal::Pressure => {
+                        let piso = v * (sym.trace() / 3.0 - self.p_ext);
+                        for k in 0..3 {
+                            g[(k, k)] = piso;
+                        }
+                    }
+                    Normal::Gradient => g[(1, 1)] = v * (sym[(1, 1)] - self.p_ext),
+                }
+                g
+            }
+        };
+    }
+
+    /// Drive the cell at the xy shear rate `rate` (= L_xy = dv_x/dy, >= 0) with the normal
+    /// stress `normal` held at `p_ext`, from the next step on (module docs). The cell's
+    /// momentum takes the rate at once; for `Normal::Gradient` the x and z lengths stop.
+    pub fn drive_at_rate(&mut self, rate: f64, normal: Normal, p_ext: f64) -> Result<()> {
+        crate::error::check_positive("p_ext", p_ext)?;
+        if !(rate.is_finite() && rate >= 0.0) {
+            return Err(Error::param(
+                "shear rate",
+                rate,
+                "a finite rate >= 0 (dv_x/dy; the sign of the flow is +x at +y)",
+            ));
         }
-        self.drive = upper(&g);
+        self.control = Control::Rate { rate, normal };
+        self.p_ext = p_ext;
+        self.tau_ext = 0.0;
+        self.pg[(0, 1)] = self.wg * rate;
+        self.pg[(0, 2)] = 0.0;
+        self.pg[(1, 2)] = 0.0;
+        if normal == Normal::Gradient {
+            self.pg[(0, 0)] = 0.0;
+            self.pg[(2, 2)] = 0.0;
+        }
+        // The next half-kick uses the last step's drive: keep only the entries this control
+        // drives (after a restore that is the drive as saved, so restarts stay bitwise; at the
+        // switch from the stress control, sigma_yy's first half-kick is the pressure's).
+        let keep = |a: usize, b: usize| match normal {
+            Normal::Pressure => a == b,
+            Normal::Gradient => a == 1 && b == 1,
+        };
+        for a in 0..3 {
+            for b in 0..3 {
+                if !keep(a, b) {
+                    self.drive[(a, b)] = 0.0;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Remap the cell to the equivalent lattice with the smallest tilts.
@@ -281,17 +364,26 @@ impl Domain for PrCell {
         // without bound (a run that keeps accelerating); stop it before the packing dissolves.
         let phi_ratio = self.v_ref / self.volume();
         if phi_ratio < 0.05 {
+            let (driving, cause) = match self.control {
+                Control::Stress => (
+                    format!("tau_ext/p_ext = {:.3}", self.tau_ext / self.p_ext),
+                    "the imposed stress ratio is above the largest the material sustains in \
+                     steady flow: the flow accelerates and dilutes (not steady, not averaged)",
+                ),
+                Control::Rate { rate, .. } => (
+                    format!("shear rate {rate:.3e} at p_ext = {:.3e}", self.p_ext),
+                    "the imposed rate is too fast for the normal stress: the cell dilutes to a \
+                     gas (lower the rate or raise p_ext)",
+                ),
+            };
             return Err(Error::Instability {
                 step,
                 particles: vec![],
                 message: format!(
-                    "the cell dilated {:.0}-fold from its densest state (tau_ext/p_ext = {:.3})",
+                    "the cell dilated {:.0}-fold from its densest state ({driving})",
                     1.0 / phi_ratio,
-                    self.tau_ext / self.p_ext
                 ),
-                cause: "the imposed stress ratio is above the largest the material sustains in \
-                        steady flow: the flow accelerates and dilutes (not steady, not averaged)"
-                    .into(),
+                cause: cause.into(),
             });
         }
         let w = self.widths();
@@ -325,7 +417,16 @@ impl Domain for PrCell {
         check_stress(p_ext, tau_ext)?;
         self.p_ext = p_ext;
         self.tau_ext = tau_ext;
+        self.control = Control::Stress;
         Ok(())
+    }
+    fn set_rate(&mut self, rate: f64, gradient: bool, p_ext: f64) -> Result<()> {
+        let normal = if gradient {
+            Normal::Gradient
+        } else {
+            Normal::Pressure
+        };
+        self.drive_at_rate(rate, normal, p_ext)
     }
     fn observables(&self) -> Vec<(String, f64)> {
         let ax = ["x", "y", "z"];

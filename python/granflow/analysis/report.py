@@ -413,6 +413,7 @@ _ReportFn = Callable[..., tuple[dict[str, SEvsTime], dict[str, float], float, li
 REPORTS: dict[str, tuple[tuple[str, ...], _ReportFn]] = {
     "channel": (CHANNEL_FIGURES, _channel_report),
     "cell": (CELL_FIGURES, _cell_report),
+    "rate_cell": (CELL_FIGURES, _cell_report),  # the cell's series, the cell's report
 }
 FIGURES: dict[str, tuple[str, ...]] = {name: figs for name, (figs, _) in REPORTS.items()}
 

@@ -4,6 +4,8 @@
   Kesava Rao & Kumaran).
 - :class:`ShearCell` (:mod:`granflow.scenes.cell`) — stress-controlled triclinic cell of 002
   (Srivastava et al.).
+- :class:`RateCell` (:mod:`granflow.scenes.rate_cell`) — the same cell sheared at an imposed
+  rate with a normal stress held (the protocol LAMMPS runs).
 - :class:`PeriodicGas` (:mod:`granflow.scenes.gas`) — a periodic box of spheres (kernel checks,
   benchmarks, quick tests).
 
@@ -39,6 +41,7 @@ from .cell import ShearCell
 from .cell_energy import EnergyBalance, cell_energy_balance
 from .channel import Channel
 from .gas import PeriodicGas
+from .rate_cell import RateCell
 
 
 def get_scene(name: str) -> type[Scene]:
@@ -55,6 +58,7 @@ __all__ = [
     "Channel",
     "EnergyBalance",
     "PeriodicGas",
+    "RateCell",
     "Scene",
     "SceneParameters",
     "ShearCell",

@@ -78,6 +78,8 @@ KERNEL_DILATION_MESSAGE = "the cell dilated"
 #: A cell stopped by another guard has dilated under shear when phi fell below this fraction
 #: of its largest value.
 DILATED_PHI_FRACTION = 0.5
+#: the largest barostat frequency times dt (ShearCell's omega_g_factor check)
+OMEGA_G_DT_MAX = 1.0
 
 
 def fabric(normals: np.ndarray) -> np.ndarray:
@@ -152,12 +154,21 @@ class ShearCell(SceneParameters):
         self.a = float(np.mean(d))
         m_mean = mat.mean_mass(d)
         self.t_c = mat.contact_time("mean", d)
-        omega_g = self.omega_g_factor * np.sqrt(mat.kn_value / m_mean)
-        self.w_g = float(len(d) * mat.kn_value * self.a**2 / omega_g**2)
         dt = self.timestep
         if not (dt is not None and 0 < dt <= 0.1 * self.t_c):
             raise ParameterError(f"invalid dt = {dt!r}: allowed 0 < dt <= 0.1 t_c = "
                                  f"{0.1 * self.t_c:.4g}, or None for the material's rule")
+        # The barostat is a controller of gain 1/W_g: its oscillation, at ~omega_g, must be
+        # resolved by the leapfrog step (stable for omega dt < 2; OMEGA_G_DT_MAX keeps a margin
+        # for the packing's stiffening, which raises the frequency)
+        f_max = OMEGA_G_DT_MAX / (float(np.sqrt(mat.kn_value / m_mean)) * dt)
+        if not (0 < self.omega_g_factor <= f_max):
+            raise ParameterError(
+                f"invalid omega_g_factor = {self.omega_g_factor!r}: allowed 0 < omega_g_factor "
+                f"<= {f_max:.3g} (omega_g dt <= {OMEGA_G_DT_MAX:g} at dt = {dt:.4g}: a stiffer "
+                "barostat is not resolved by the time step and cannot be stable)")
+        omega_g = self.omega_g_factor * np.sqrt(mat.kn_value / m_mean)
+        self.w_g = float(len(d) * mat.kn_value * self.a**2 / omega_g**2)
         self._core: _core.Sim | None = None
         self._tables = SampleTables()
         self.phi_max = vs / self._length**3  # densest state seen at the run's chunk boundaries
@@ -223,6 +234,7 @@ class ShearCell(SceneParameters):
         if self.shear_start_time is not None:
             return
         if self.start == "dilute":
+            self._drive(core)
             self.shear_start_time = 0.0
             return
         dt = self.timestep
@@ -235,8 +247,12 @@ class ShearCell(SceneParameters):
             prev, phi = phi, self._vs / float(core.volume)
             if abs(phi - prev) < COMPACT_TOL * phi:
                 break
-        core.set_stress(float(self.p_ext), float(self.tau_ratio * self.p_ext))
+        self._drive(core)
         self.shear_start_time = float(core.time)
+
+    def _drive(self, core: _core.Sim) -> None:
+        """Switch the driving on: p_ext and tau_ext (a subclass may drive otherwise)."""
+        core.set_stress(float(self.p_ext), float(self.tau_ratio * self.p_ext))
 
     @classmethod
     def from_spec(cls, params: Mapping[str, Any], seed: int = 0,
@@ -353,9 +369,9 @@ class ShearCell(SceneParameters):
         """The kernel state of ``path``; a checkpoint is written by :meth:`run`, after the
         compaction, so the restored cell shears at tau_ext (from ``shear_start_time``, kept in
         the checkpoint's header)."""
-        state = read_checkpoint_state(path, "cell")
+        state = read_checkpoint_state(path, self.scene_name)
         core = self._build()
         core.load_checkpoint(os.fspath(path))
         t = state.get("shear_start_time")
         self.shear_start_time = float(t) if t is not None else float(core.time)
-        core.set_stress(float(self.p_ext), float(self.tau_ratio * self.p_ext))
+        self._drive(core)
