@@ -37,10 +37,12 @@ def _offset_phrase(off: pl.DataFrame, mu: float, col: str, p: float) -> str:
     return f"{v:+.4f} +- {e:.4f} ({'within 2 SE' if z <= AGREE_SIGMA else f'{z:.0f} SE'})"
 
 
-def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame) -> str:
+def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame,
+               checked: bool = False) -> str:
     """What the comparison shows, every number computed from the dataset: the offsets of
     ``off`` (:func:`offsets`), the curve verdicts of ``curves`` (:func:`curve_comparison`),
-    the per-constant verdicts of ``rows`` (:func:`table_rows`)."""
+    the per-constant verdicts of ``rows`` (:func:`table_rows`); ``checked``: whether the
+    LAMMPS and protocol checks (:func:`protocol_checks`) are in the report."""
     lines = ["What the differences are, as measured here:", ""]
     for mu in sorted(set(off["mu_s"].to_list())) if off.height else []:
         ps = sorted(set(off.filter(pl.col("mu_s") == mu)["p_ext"].to_list()), reverse=True)
@@ -72,15 +74,76 @@ def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame) -> s
         "(c0, A, alpha) strongly correlated: a constant that 'differs' alone does not make a "
         "curve differ; the headline comparison above is of the curves, with the fits' "
         "covariance.",
-        "* **Not compared here.** Whether LAMMPS gives the same offsets on one protocol is "
-        "not measured in this dataset (a rate-controlled comparison is planned); the "
-        "reading of t_c (collision against printed) moves I by -1.9 % +- 1.6 % and mu1, phi "
+        ("* **This code, the protocol.** LAMMPS on one protocol from the same states, and the "
+         "rate-controlled cell against this stress-controlled one at the same I: the section "
+         "'This code, or the protocol?' below; the "
+         if checked else
+         "* **Not compared here.** Whether LAMMPS gives the same offsets on one protocol is "
+         "not measured with this dataset (benchmarks/lammps_rate_cell.py); the ")
+        + "reading of t_c (collision against printed) moves I by -1.9 % +- 1.6 % and mu1, phi "
         "not at all within their errors at "
         "mu_s = 0.3, tau/p = 0.45, N = 500 (`python benchmarks/tc_reading.py --N 500 --steps "
         "300000 --seeds 1 2 3 4`, docs/cell.md). 002 reports tau/p up to 1.2; from the "
         "compacted start no steady state exists above the runaway ratios listed below, so "
         f"the fits cover I <= {FIT_I_MAX:g} and the paper's constants at high I are not tested."]
     return "\n".join(lines)
+
+
+#: the comparisons beside a committed dataset (docs/data/<name>), if there: granflow against
+#: LAMMPS on the rate-controlled protocol (benchmarks/lammps_rate_cell.py) and the stress- against
+#: the rate-controlled cell at matched I (benchmarks/rate_cell.py equivalence)
+LAMMPS_TABLE = ("lammps_rate_cell", "table.parquet")
+EQUIVALENCE_TABLE = ("rate_cell", "equivalence.parquet")
+
+
+def protocol_checks(out: Path) -> list[str]:
+    """The section on whether the offsets are this code's or the protocol's, from the tables
+    beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE); empty when neither is there."""
+    lmp, eq = (out.parent.joinpath(*t) for t in (LAMMPS_TABLE, EQUIVALENCE_TABLE))
+    if not (lmp.exists() or eq.exists()):
+        return []
+    lines = ["## This code, or the protocol?", ""]
+    if lmp.exists():
+        t = pl.read_parquet(lmp)
+        ok = int((t["verdict"] == "agrees").sum())
+        lines += [
+            "**granflow against LAMMPS** on one protocol, from the same states: the "
+            "rate-controlled cell (granflow.scenes.RateCell, sigma_yy held at p_ext, x and z "
+            "fixed; N = 2000, p_ext = 1e-4) handed at the switch to LAMMPS's `fix "
+            "deform/pressure` with `gran/hooke/history` (`python benchmarks/lammps_rate_cell.py "
+            "--mu 0 0.3 --I 0.15 0.05 --seeds 1 2 3 --steps 200000 --strain 10 --every 100`); "
+            "mu = |sigma_xy|/sigma_yy, N1, N2 over p; replica means of the seeds, z = "
+            f"difference over the combined SE. {ok} of {t.height} within 2 combined SEs:", "",
+            md_table(t.select("mu_s", "I", "quantity",
+                              pl.struct("granflow", "granflow_se").map_elements(
+                                  lambda r: pm(r["granflow"], r["granflow_se"], 4),
+                                  return_dtype=pl.String).alias("granflow"),
+                              pl.struct("lammps", "lammps_se").map_elements(
+                                  lambda r: pm(r["lammps"], r["lammps_se"], 4),
+                                  return_dtype=pl.String).alias("LAMMPS"),
+                              "z", "verdict"), {"mu_s": "g", "I": "g", "z": "+.2f"}), ""]
+    if eq.exists():
+        e = pl.read_parquet(eq)
+        ok = int((e["verdict"] == "agrees").sum())
+        lines += [
+            "**Stress against rate control** in granflow: this campaign's points against the "
+            "rate-controlled cell with the pressure held, at each point's replica-mean I, the "
+            "same seeds, 12,000 t_c each (`python benchmarks/rate_cell.py equivalence`); the SE "
+            "of a difference carries the stress point's SE of I through the local slope. "
+            f"{ok} of {e.height} within 2 combined SEs:", "",
+            md_table(e.select("mu_s", "tau_ratio", pl.col("I_stress").alias("I"), "quantity",
+                              pl.struct("stress", "stress_se").map_elements(
+                                  lambda r: pm(r["stress"], r["stress_se"], 4),
+                                  return_dtype=pl.String).alias("stress-controlled"),
+                              pl.struct("rate", "rate_se").map_elements(
+                                  lambda r: pm(r["rate"], r["rate_se"], 4),
+                                  return_dtype=pl.String).alias("rate-controlled"),
+                              "z", "verdict"),
+                     {"mu_s": "g", "tau_ratio": "g", "I": ".3f", "z": "+.2f"}), ""]
+    lines += ["Where both agree, the offsets from 002's laws found above are neither this "
+              "code's nor the protocol's at those points (p_ext = 1e-4); what remains is 002's "
+              "set-up. 002's three pressures are not run yet.", ""]
+    return lines
 
 
 KEYS = ("mu_s", "N", "p_ext", "tau_ratio")
@@ -509,7 +572,9 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   "SE of I propagated through the curve's slope):", "",
                   md_table(off, {**{c: ".4f" for c in off.columns if c != "mu_s"},
                                   "p_ext": ".0e"}), "",
-                  discussion(off, curve_comparison(pool, fits, n_main), rows), ""]
+                  discussion(off, curve_comparison(pool, fits, n_main), rows,
+                             checked=bool(protocol_checks(out))), ""]
+    lines += protocol_checks(out)
     lines += ["## Points", "",
               "Every point's replica mean; ± the point's SE, the larger of the within-run SE "
               "(from the runs' own blocking SEs) and the between-replica SE (from their spread, "
