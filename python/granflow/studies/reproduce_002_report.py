@@ -96,6 +96,17 @@ LAMMPS_TABLE = ("lammps_rate_cell", "table.parquet")
 EQUIVALENCE_TABLE = ("rate_cell", "equivalence.parquet")
 
 
+def _pm_column(value: str, se: str, name: str) -> pl.Expr:
+    """The column ``name``: ``value ± se`` as text (4 decimals)."""
+    return pl.struct(value, se).map_elements(lambda r: pm(r[value], r[se], 4),
+                                             return_dtype=pl.String).alias(name)
+
+
+def _listed(col: pl.Series) -> str:
+    """The distinct values of ``col``, space-separated as on a command line."""
+    return " ".join(f"{v:g}" for v in sorted(set(col.to_list())))
+
+
 def protocol_checks(out: Path) -> list[str]:
     """The section on whether the offsets are this code's or the protocol's, from the tables
     beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE); empty when neither is there."""
@@ -111,16 +122,13 @@ def protocol_checks(out: Path) -> list[str]:
             "rate-controlled cell (granflow.scenes.RateCell, sigma_yy held at p_ext, x and z "
             "fixed; N = 2000, p_ext = 1e-4) handed at the switch to LAMMPS's `fix "
             "deform/pressure` with `gran/hooke/history` (`python benchmarks/lammps_rate_cell.py "
-            "--mu 0 0.3 --I 0.15 0.05 --seeds 1 2 3 --steps 200000 --strain 10 --every 100`); "
+            f"--mu {_listed(t['mu_s'])} --I {_listed(t['I'])} --seeds 1 2 3 --steps 200000 "
+            "--strain 10 --every 100`); "
             "mu = |sigma_xy|/sigma_yy, N1, N2 over p; replica means of the seeds, z = "
             f"difference over the combined SE. {ok} of {t.height} within 2 combined SEs:", "",
             md_table(t.select("mu_s", "I", "quantity",
-                              pl.struct("granflow", "granflow_se").map_elements(
-                                  lambda r: pm(r["granflow"], r["granflow_se"], 4),
-                                  return_dtype=pl.String).alias("granflow"),
-                              pl.struct("lammps", "lammps_se").map_elements(
-                                  lambda r: pm(r["lammps"], r["lammps_se"], 4),
-                                  return_dtype=pl.String).alias("LAMMPS"),
+                              _pm_column("granflow", "granflow_se", "granflow"),
+                              _pm_column("lammps", "lammps_se", "LAMMPS"),
                               "z", "verdict"), {"mu_s": "g", "I": "g", "z": "+.2f"}), ""]
     if eq.exists():
         e = pl.read_parquet(eq)
@@ -132,12 +140,8 @@ def protocol_checks(out: Path) -> list[str]:
             "of a difference carries the stress point's SE of I through the local slope. "
             f"{ok} of {e.height} within 2 combined SEs:", "",
             md_table(e.select("mu_s", "tau_ratio", pl.col("I_stress").alias("I"), "quantity",
-                              pl.struct("stress", "stress_se").map_elements(
-                                  lambda r: pm(r["stress"], r["stress_se"], 4),
-                                  return_dtype=pl.String).alias("stress-controlled"),
-                              pl.struct("rate", "rate_se").map_elements(
-                                  lambda r: pm(r["rate"], r["rate_se"], 4),
-                                  return_dtype=pl.String).alias("rate-controlled"),
+                              _pm_column("stress", "stress_se", "stress-controlled"),
+                              _pm_column("rate", "rate_se", "rate-controlled"),
                               "z", "verdict"),
                      {"mu_s": "g", "tau_ratio": "g", "I": ".3f", "z": "+.2f"}), ""]
     lines += ["Where both agree, the offsets from 002's laws found above are neither this "
