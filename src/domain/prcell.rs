@@ -96,6 +96,14 @@ fn check_stress(p_ext: f64, tau_ext: f64) -> Result<()> {
     Ok(())
 }
 
+/// Whether a rate-controlled cell with `normal` drives the cell momentum's entry (a, b).
+fn drives(normal: Normal, a: usize, b: usize) -> bool {
+    match normal {
+        Normal::Pressure => a == b,
+        Normal::Gradient => a == 1 && b == 1,
+    }
+}
+
 fn upper(m: &M3) -> M3 {
     let mut u = *m;
     u[(1, 0)] = 0.0;
@@ -213,27 +221,19 @@ impl PrCell {
         self.control = Control::Rate { rate, normal };
         self.p_ext = p_ext;
         self.tau_ext = 0.0;
-        self.pg[(0, 1)] = self.wg * rate;
-        self.pg[(0, 2)] = 0.0;
-        self.pg[(1, 2)] = 0.0;
-        if normal == Normal::Gradient {
-            self.pg[(0, 0)] = 0.0;
-            self.pg[(2, 2)] = 0.0;
-        }
-        // The next half-kick uses the last step's drive: keep only the entries this control
-        // drives (after a restore that is the drive as saved, so restarts stay bitwise; at the
-        // switch from the stress control, sigma_yy's first half-kick is the pressure's).
-        let keep = |a: usize, b: usize| match normal {
-            Normal::Pressure => a == b,
-            Normal::Gradient => a == 1 && b == 1,
-        };
+        // What this control does not drive stops: the cell momentum's entries (but xy, held at
+        // the rate) and the last step's drive, which the next half-kick uses (after a restore
+        // that is the drive as saved, so restarts stay bitwise; at the switch from the stress
+        // control, sigma_yy's first half-kick is the pressure's).
         for a in 0..3 {
-            for b in 0..3 {
-                if !keep(a, b) {
+            for b in a..3 {
+                if !drives(normal, a, b) {
                     self.drive[(a, b)] = 0.0;
+                    self.pg[(a, b)] = 0.0;
                 }
             }
         }
+        self.pg[(0, 1)] = self.wg * rate;
         Ok(())
     }
 
