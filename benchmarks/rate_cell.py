@@ -46,30 +46,55 @@ SHOWN = {"settling": ("I_set", "state", "strain_total", "start_strain", "start_t
 
 def run_cell(path: Path, *, N: int, mu: float, I: float, normal: str, seed: int,  # noqa: E741
              strain: float | None = None, length_tc: float | None = None,
-             sample_every: int = 200) -> pl.DataFrame:
+             sample_every: int = 200, stint: int = 2_000_000) -> pl.DataFrame:
     """Run (or read) one rate cell: ``strain`` after the switch, or ``length_tc`` t_c plus
-    a fifth for the transient; the sheared part of its series (with t_c in the metadata)."""
+    a fifth for the transient; the sheared part of its series (with t_c in the metadata).
+    Runs in stints of ``stint`` steps, each ending with a checkpoint and the series so far in
+    ``<path's folder>/work/<path's stem>/``: a stopped run goes on from there (the slow flows
+    take hours)."""
     if path.exists():
         return pl.read_parquet(path)
+    import json
+
+    import pyarrow.parquet as pq
+    from granflow import io
     from granflow.scenes import RateCell
 
+    work = path.parent / "work" / path.stem
+    ck, part, meta = work / "cell.gfck", work / "series.parquet", work / "meta.json"
     c = RateCell(N=N, mu=mu, p_ext=P_EXT, inertial_number=I, normal=normal, seed=seed,
                  sample_every=sample_every, threads=1)
     t0 = time.perf_counter()
-    c.prepare(progress=False)
+    wall0 = 0.0
+    if ck.exists() and meta.exists():
+        c.restore(ck)
+        c.load_tables({"series": pq.read_table(part)})
+        wall0 = float(json.loads(meta.read_text())["wall_s"])
+    else:
+        c.prepare(progress=False)
     dt = c.timestep
-    assert dt is not None
+    assert dt is not None and c.shear_start_time is not None
     span = strain / c.shear_rate if strain is not None else 1.2 * float(length_tc) * c.t_c
     steps = int(math.ceil(span / dt / sample_every)) * sample_every
-    c.run(steps, progress=False)
+    work.mkdir(parents=True, exist_ok=True)
+    while (left := steps - round((c.core.time - c.shear_start_time) / dt)) > 0:
+        c.run(min(stint, left), progress=False)
+        io.write_parquet(c.tables()["series"], part)
+        c.save_checkpoint(ck)
+        wall = wall0 + time.perf_counter() - t0
+        meta.write_text(json.dumps({"wall_s": wall}))
+        done = (c.core.time - c.shear_start_time) * c.shear_rate
+        print(f"  {path.stem}: strain {done:.3f} of {span * c.shear_rate:g}, {wall:.0f} s",
+              flush=True)
+    wall = wall0 + time.perf_counter() - t0
     s = pl.from_arrow(c.tables()["series"])
     assert isinstance(s, pl.DataFrame)
     s = s.filter(pl.col("t") > c.shear_start_time).with_columns(
         t_c=pl.lit(c.t_c), shear_start=pl.lit(c.shear_start_time),
-        wall_s=pl.lit(time.perf_counter() - t0), shear_rate_set=pl.lit(c.shear_rate))
+        wall_s=pl.lit(wall), shear_rate_set=pl.lit(c.shear_rate))
     path.parent.mkdir(parents=True, exist_ok=True)
     s.write_parquet(path)
-    print(f"  {path.name}: {steps:,} steps, {time.perf_counter() - t0:.0f} s", flush=True)
+    print(f"  {path.name}: {steps:,} steps, {wall:.0f} s", flush=True)
     return s
 
 

@@ -148,7 +148,8 @@ def test_the_stop_rule_refuses_to_stop_before_its_minimum_length():
 
     def row(t_tc: float, **kw: object) -> dict[str, object]:
         # (kernel time = 2 t_c: T_avg and tau_max in kernel time, the floor in t_c)
-        return {"state": "flowing", "T_avg": 2.0 * t_tc, "T_avg_tc": t_tc, "tau_max": 10.0,
+        return {"state": "flowing", "p_ext": 1e-4, "T_avg": 2.0 * t_tc, "T_avg_tc": t_tc,
+                "tau_max": 10.0,
                 "shear_rate": 0.1, "mu1": 0.4, "mu1_se": 1e-6, "phi": 0.5, "phi_se": 1e-6,
                 "I": 0.1, "I_se": 1e-6, **kw}
 
@@ -161,6 +162,23 @@ def test_the_stop_rule_refuses_to_stop_before_its_minimum_length():
     assert not converged(row(2000.0, mu1_se=0.1), plan)
     assert not converged(row(5000.0, state="drifting"), plan)
     assert not converged(row(5000.0, tau_max=math.nan), plan)
+
+
+def test_a_plan_given_at_one_pressure_scales_its_times_with_the_inertial_time():
+    plan = Plan("t", (), min_length=1000.0, min_taus=20.0, min_strain=2.0, stint=100.0,
+                max_shear={2000: 5000.0}, p_ref=1e-4)
+    # (dt = 0.02 t_c: 50 steps per t_c)
+    assert plan.stint_steps(1e-4) == 5000 and plan.max_steps(2000, 1e-4) == 250_000
+    assert plan.stint_steps(1e-6) == 50_000 and plan.max_steps(2000, 1e-6) == 2_500_000
+    assert plan.min_length_at(1e-5) == pytest.approx(1000.0 * math.sqrt(10.0))
+    row = {"state": "flowing", "T_avg": 2e4, "T_avg_tc": 1e4, "tau_max": 10.0,
+           "shear_rate": 0.1}
+    assert long_enough({**row, "p_ext": 1e-6}, plan)  # 10,000 t_c >= 10 x 1000
+    assert not long_enough({**row, "p_ext": 1e-6, "T_avg_tc": 9000.0}, plan)
+    # without p_ref the times are the same t_c at every pressure
+    flat = Plan("t", (), min_length=1000.0, stint=100.0, max_shear={2000: 5000.0})
+    assert flat.stint_steps(1e-6) == 5000 and flat.max_steps(2000, 1e-6) == 250_000
+    assert flat.min_length_at(1e-6) == 1000.0
 
 
 def test_no_se_from_fewer_than_ten_blocks():
@@ -183,10 +201,12 @@ def test_no_se_from_fewer_than_ten_blocks():
 # --------------------------------------------------------------------------------------------
 # the 002 report's comparisons
 # --------------------------------------------------------------------------------------------
-def _paper_pool(shift: float) -> pl.DataFrame:
-    """Replica means at mu_s = 0.3 on 002's curves (mu1 shifted by ``shift``), SE 0.002."""
-    inum = np.geomspace(0.01, 0.4, 8)
-    row: dict[str, object] = {"mu_s": 0.3, "N": 2000, "p_ext": 1e-4,
+def _paper_pool(shift: float, p_ext: float = 1e-4,
+                lo: float = 0.01) -> pl.DataFrame:
+    """Replica means at mu_s = 0.3 on 002's curves (mu1 shifted by ``shift``), SE 0.002,
+    at ``p_ext``, I from ``lo`` to 0.4."""
+    inum = np.geomspace(lo, 0.4, 8)
+    row: dict[str, object] = {"mu_s": 0.3, "N": 2000, "p_ext": p_ext,
                               "tau_ratio": np.linspace(0.4, 0.6, 8), "I": inum,
                               "I_se": 1e-4 * inum}
     for law in ("mu1", "mu2", "mu3", "phi"):
@@ -213,6 +233,27 @@ def test_the_curve_comparison_and_the_printed_precision():
     assert rows.filter(pl.col("parameter") == "phi_0")["verdict"][0] == "agrees"
     with pytest.raises(KeyError):
         rh.printed_unit("nope")
+
+
+def test_the_laws_are_fitted_over_every_pressure_and_the_collapse_is_tested():
+    from granflow.studies import reproduce_002_report as rep
+
+    one = _paper_pool(0.0)
+    assert not rep.collapse(one, rep.fits_by_mu(one)).height  # one pressure: nothing to test
+    both = pl.concat([one, _paper_pool(0.0, p_ext=1e-5, lo=0.003)])
+    fits = rep.fits_by_mu(both)
+    assert fits[0.3]["mu1"].n == 16  # (both pressures in one fit, as 002)
+    tab = rep.collapse(both, fits)
+    assert set(tab["p_ext"].to_list()) == {1e-4, 1e-5}
+    assert set(tab["law"].to_list()) == set(rep.COLLAPSE_LAWS)
+    assert (tab["verdict"] == "collapses").all(), tab
+    # mu1 at the lower pressure 0.01 above the others' curve (5 SEs of a point): apart
+    apart = pl.concat([one, _paper_pool(0.01, p_ext=1e-5, lo=0.003)])
+    tab = rep.collapse(apart, rep.fits_by_mu(apart)).filter(pl.col("law") == "mu1")
+    assert all(v.startswith("apart") for v in tab["verdict"]), tab
+    z = dict(zip(tab["p_ext"].to_list(), tab["z"].to_list(), strict=True))
+    assert z[1e-5] > 2 and z[1e-4] < -2
+    assert "## Pressure collapse" in rep.collapse_section(apart, rep.fits_by_mu(apart), 2000)[0]
 
 
 def test_the_shared_slow_mode_is_in_the_se():

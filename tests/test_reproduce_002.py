@@ -32,10 +32,10 @@ def test_points_reach_their_se_targets_and_are_kept(quick):
     for r in d.iter_rows(named=True):
         assert r["state"] not in ("runaway", "failed", "short"), r
         assert isinstance(r["converged"], bool)
-        assert r["converged"] or r["shear_steps"] >= plan.max_steps(r["N"])
+        assert r["converged"] or r["shear_steps"] >= plan.max_steps(r["N"], r["p_ext"])
         if r["converged"]:
             # (no stop before the minimum length, whatever the SEs)
-            assert long_enough(r, plan) and r["T_avg_tc"] >= plan.min_length
+            assert long_enough(r, plan) and r["T_avg_tc"] >= plan.min_length_at(r["p_ext"])
             for k, t in plan.targets().items():
                 assert r[f"{k}_se"] <= t * abs(r[k])
             assert 2 * r["shear_rate"] * r["T_avg"] >= plan.min_strain

@@ -30,8 +30,8 @@ from ._campaign.cell import (
     run_campaign,
 )
 
-__all__ = ["OBSERVABLES", "SE_FRACTIONS", "Plan", "Point", "full_plan", "main", "paper_plan",
-           "quick_plan", "ratio_range", "reanalyse", "run_campaign"]
+__all__ = ["OBSERVABLES", "PRESSURES", "SE_FRACTIONS", "Plan", "Point", "full_plan", "main",
+           "paper_plan", "quick_plan", "ratio_range", "reanalyse", "run_campaign"]
 
 #: tau/p per mu_s: from just above yield to the largest ratio with steady flow (measured from
 #: the compacted start, docs/cell.md), then one ratio above it that records the runaway
@@ -56,15 +56,25 @@ CURVE_MU = (0.0, 0.3)
 #: independent seeds of every point (its value is their mean, its SE from their spread and
 #: their own SEs: granflow.analysis.replicas)
 REPLICAS = 3
+#: 002's three pressures p_ext a/kn, the first the campaign's main one (run first)
+PRESSURES = (1e-4, 1e-5, 1e-6)
+#: the size check at N = 10,000 (p_ext = 1e-4): one ratio of each of CURVE_MU, mid-range in I
+SIZE_CHECK = {0.0: 0.3, 0.3: 0.5}
 
 
 def full_plan() -> Plan:
-    """The six mu_s at N = 2000, p_ext = 1e-4: the ratios of RATIOS, MORE_RATIOS and
-    NEAR_YIELD, REPLICAS seeds each, then a runaway probe per mu_s of RUNAWAY (one seed).
+    """The six mu_s at N = 2000 and 002's three pressures, REPLICAS seeds each.
+
+    At p_ext = 1e-4: the ratios of RATIOS, MORE_RATIOS and NEAR_YIELD, then a runaway probe
+    per mu_s of RUNAWAY (one seed). Then the lower pressures at the ratios of RATIOS and
+    MORE_RATIOS (without the near-yield ratios, which arrest at 1e-4, and the runaway probes):
+    mu_s = 0 and 0.3 at 1e-5, then at 1e-6 (002's collapse panels and the curve comparison),
+    the size check (N = 10,000 at SIZE_CHECK), then the other mu_s at 1e-5 and at 1e-6.
+
     Ordered so that a campaign stopped part way (it is split over sessions) leaves whole
-    pieces: a ratio's seeds one after another; first every mu_s's highest ratio, then all of
-    mu_s = 0 and 0.3 (the frictions 002 gives every constant for: the curve comparison), then
-    the other mu_s ratio by ratio from fast flow down to the slow flows near yield."""
+    pieces: a ratio's seeds one after another, fast flows before slow ones. The plan's times
+    are given at p_ext = 1e-4 and scale with the inertial time at the lower pressures
+    (``Plan.p_ref``): a point at 1e-6 has 10x the t_c of one at 1e-4 for the same strain."""
     ratios = {mu: sorted({*rs, *NEAR_YIELD.get(mu, ())}, reverse=True)
               for mu, rs in sorted({**RATIOS, **MORE_RATIOS}.items())}
     seeds = range(1, REPLICAS + 1)
@@ -75,8 +85,20 @@ def full_plan() -> Plan:
             for mu, rs in ratios.items() if mu not in CURVE_MU and k < len(rs)
             for seed in seeds]
     pts += [Point(mu, r, 1) for mu, r in RUNAWAY.items()]
-    # (2,000,000 steps: the slowest flows near yield stop there, with the SEs they have)
-    return Plan("full", tuple(pts), max_shear={2000: 40_000.0})
+    low = {mu: sorted(rs, reverse=True) for mu, rs in sorted({**RATIOS, **MORE_RATIOS}.items())}
+
+    def at(p: float, mus: Iterable[float]) -> list[Point]:
+        return [Point(mu, r, seed, p_ext=p) for mu in mus for r in low[mu] for seed in seeds]
+
+    others = [mu for mu in low if mu not in CURVE_MU]
+    for p in PRESSURES[1:]:
+        pts += at(p, CURVE_MU)
+    pts += [Point(mu, r, seed, N=10_000) for mu, r in SIZE_CHECK.items() for seed in seeds]
+    for p in PRESSURES[1:]:
+        pts += at(p, others)
+    # (2,000,000 steps at 1e-4: the slowest flows near yield stop there, with the SEs they
+    # have; 20,000,000 at 1e-6)
+    return Plan("full", tuple(pts), max_shear={2000: 40_000.0}, p_ref=PRESSURES[0])
 
 
 def ratio_range(mu_s: float, n: int = 8) -> tuple[float, ...]:
@@ -94,10 +116,10 @@ def paper_plan() -> Plan:
     from granflow.analysis.rheology import TABLE1
 
     pts = tuple(Point(row[0], r, seed, N=10_000, p_ext=p)
-                for p in (1e-4, 1e-5, 1e-6) for seed in (1, 2, 3)
+                for p in PRESSURES for seed in (1, 2, 3)
                 for row in TABLE1 for r in ratio_range(row[0]))
-    # (steps per strain grow as p^-1/2: the cap with them)
-    return Plan("paper", pts, max_shear={10_000: 80_000.0})  # (4,000,000 steps)
+    # (4,000,000 steps at 1e-4; steps per strain grow as p^-1/2, the cap with them)
+    return Plan("paper", pts, max_shear={10_000: 80_000.0}, p_ref=PRESSURES[0])
 
 
 def quick_plan() -> Plan:

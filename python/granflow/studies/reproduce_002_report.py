@@ -185,7 +185,8 @@ def usable(pool: pl.DataFrame) -> pl.Expr:
     return has_errors(pool) & agreeing(pool)
 
 
-#: the campaign's pressure (the fits and figures use it; other pressures are compared apart)
+#: the campaign's first pressure (the cost of the paper's points is scaled from it where a
+#: pressure has no measured points)
 P_MAIN = 1e-4
 
 
@@ -195,15 +196,16 @@ P_MAIN = 1e-4
 FIT_I_MAX = 0.5
 
 
-def main_set(pool: pl.DataFrame, n: int, p_ext: float = P_MAIN) -> pl.DataFrame:
-    """The points the laws are fitted to: ``N = n``, ``p_ext``, I <= FIT_I_MAX, every reported
-    quantity with an SE (:func:`usable`)."""
-    return pool.filter((pl.col("N") == n) & ((pl.col("p_ext") / p_ext - 1).abs() < 1e-9)
-                       & (pl.col("I") <= FIT_I_MAX) & usable(pool))
+def main_set(pool: pl.DataFrame, n: int) -> pl.DataFrame:
+    """The points the laws are fitted to: ``N = n``, every pressure (002 fits each mu_s over
+    its three pressures: "all the curves at various pressures collapse onto a master curve",
+    §4.1), I <= FIT_I_MAX, every reported quantity with an SE (:func:`usable`)."""
+    return pool.filter((pl.col("N") == n) & (pl.col("I") <= FIT_I_MAX) & usable(pool))
 
 
 def fits_by_mu(pool: pl.DataFrame, n: int = 2000) -> dict[float, dict[str, rh.FitResult]]:
-    """The four laws fitted per mu_s at ``N = n``, p_ext = P_MAIN (SEs of I propagated)."""
+    """The four laws fitted per mu_s at ``N = n`` over every pressure (:func:`main_set`; SEs
+    of I propagated)."""
     out = {}
     for (mu,), g in main_set(pool, n).group_by(["mu_s"], maintain_order=True):
         out[float(mu)] = rh.fit_all(g, include_x_errors=True, states=None)
@@ -354,12 +356,72 @@ def offsets(pool: pl.DataFrame, n: int = 2000) -> pl.DataFrame:
     return pl.DataFrame(rows).sort(["mu_s", "p_ext"]) if rows else pl.DataFrame()
 
 
+#: the laws whose pressure collapse is tested (002 draws panels (b) of figs. 3, 4, 6)
+COLLAPSE_LAWS = ("mu1", "mu2", "phi")
+
+
+def collapse(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
+             n: int = 2000) -> pl.DataFrame:
+    """Does each mu_s collapse over pressure? Per mu_s, law (:data:`COLLAPSE_LAWS`) and
+    pressure: the fitted points' inverse-variance mean residual from the law fitted over all
+    pressures (:func:`fits_by_mu`) with its SE (the point's SE and the SE of I through the
+    fit's slope), z, chi2/dof of those points about the fit, and the verdict (|z| <= 2:
+    "collapses"). Empty with fewer than two pressures at a mu_s."""
+    rows = []
+    fitted = main_set(pool, n)
+    for (mu,), g in fitted.group_by(["mu_s"], maintain_order=True):
+        ps = sorted(set(g["p_ext"].to_list()), reverse=True)
+        if len(ps) < 2:
+            continue
+        for law in COLLAPSE_LAWS:
+            f = fits.get(float(mu), {}).get(law)
+            if f is None or not f.success:
+                continue
+            for p in ps:
+                h = g.filter((pl.col("p_ext") / p - 1).abs() < 1e-9)
+                ii = h["I"].to_numpy()
+                eps = 1e-6 * ii
+                slope = (np.asarray(f(ii + eps)) - np.asarray(f(ii))) / eps
+                se = np.sqrt(h[f"{law}_se"].to_numpy() ** 2 + (slope * h["I_se"].to_numpy()) ** 2)
+                d = h[law].to_numpy() - np.asarray(f(ii))
+                w = 1.0 / se**2
+                mean, err = float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+                z = mean / err
+                rows.append({"mu_s": float(mu), "law": law, "p_ext": float(p),
+                             "points": h.height, "I from": float(ii.min()),
+                             "I to": float(ii.max()), "ours - fit": mean, "SE": err, "z": z,
+                             "chi2/dof": float(np.sum(w * d**2)) / h.height,
+                             "verdict": "collapses" if abs(z) <= AGREE_SIGMA
+                             else f"apart ({abs(z):.1f} SE)"})
+    return pl.DataFrame(rows)
+
+
+def collapse_section(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
+                     n: int) -> list[str]:
+    """The pressure collapse (:func:`collapse`) as report lines; none with one pressure."""
+    tab = collapse(pool, fits, n)
+    if not tab.height:
+        return []
+    ok = tab.filter(pl.col("verdict") == "collapses").height
+    return ["## Pressure collapse", "",
+            "002: \"all the curves at various pressures collapse onto a master curve for each "
+            "mu_s\" (§4.1-4.4), with phi \"moderately\" lower at lower pressure (§4.4). Per "
+            "mu_s, law and pressure: the mean residual of that pressure's fitted points from "
+            "the law fitted over all pressures (inverse-variance weighted, the SE of I through "
+            "the fit's slope) and chi2/dof of those points about it; 'collapses': "
+            f"|z| <= {AGREE_SIGMA:g}. {ok} of {tab.height} collapse. Figures 3(b), 4(b) and "
+            "6(b) below draw it.", "",
+            md_table(tab, {"p_ext": ".0e", "I from": ".3g", "I to": ".3g",
+                           "ours - fit": "+.4f", "SE": ".4f", "z": "+.1f",
+                           "chi2/dof": ".2f"}), ""]
+
+
 def se_shrink(se: pl.DataFrame) -> pl.DataFrame:
     """Per observable: median over points of SE(fraction)/SE(all) against sqrt(1/fraction),
     over the points with both SEs (a fraction with too little data has none)."""
     rows = []
     full = se.filter(pl.col("fraction") == 1.0)
-    key = ["mu_s", "N", "tau_ratio", "seed"]
+    key = [c for c in ("mu_s", "N", "p_ext", "tau_ratio", "seed") if c in se.columns]
     for f in sorted(set(se["fraction"].to_list())):
         part = se.filter(pl.col("fraction") == f).join(full, on=key, suffix="_all")
         row: dict[str, Any] = {"fraction of the run": f, "expected (T^-1/2)": 1 / math.sqrt(f)}
@@ -372,15 +434,39 @@ def se_shrink(se: pl.DataFrame) -> pl.DataFrame:
     return pl.DataFrame(rows)
 
 
-def median_steps(points: pl.DataFrame) -> float:
-    """The median steps of shear of the flowing N = 2000 points at p = 1e-4."""
-    flow = points.filter((pl.col("state") == "flowing") & (pl.col("N") == 2000)
-                         & ((pl.col("p_ext") / P_MAIN - 1).abs() < 1e-9))
-    return float(flow["shear_steps"].median()) if flow.height else math.nan  # type: ignore[arg-type]
+#: a pressure's own median steps stand for its paper-scale points once it has this many
+#: flowing N = 2000 points; below, P_MAIN's median scaled by sqrt(P_MAIN / p)
+MEDIAN_POINTS = 12
+
+
+def median_steps(points: pl.DataFrame, p_ext: float = P_MAIN) -> tuple[float, bool]:
+    """The median steps of shear of the flowing N = 2000 points at ``p_ext``, and whether
+    it is measured there (at least MEDIAN_POINTS points); else P_MAIN's median times
+    sqrt(P_MAIN / p_ext), the strain rate's inertial scaling."""
+    def at(p: float) -> pl.DataFrame:
+        return points.filter((pl.col("state") == "flowing") & (pl.col("N") == 2000)
+                             & ((pl.col("p_ext") / p - 1).abs() < 1e-9))
+
+    own = at(p_ext)
+    if own.height >= MEDIAN_POINTS:
+        return float(own["shear_steps"].median()), True  # type: ignore[arg-type]
+    main = at(P_MAIN)
+    if not main.height:
+        return math.nan, False
+    return float(main["shear_steps"].median()) * math.sqrt(P_MAIN / p_ext), False  # type: ignore[arg-type]
 
 
 #: the band of the coverage audit's rms z that counts as honest SEs
 COVERAGE_BAND = (0.7, 1.4)
+
+
+def _scaled(plan: Any) -> str:
+    """How a plan's times depend on the pressure, as a parenthesis (or nothing)."""
+    if getattr(plan, "p_ref", None) is None:
+        return ""
+    return (f" (the stint, the minimum length and the cap below are those at p_ext = "
+            f"{plan.p_ref:.0e}; at a lower p_ext they are sqrt({plan.p_ref:.0e}/p_ext) times "
+            "longer, the inertial time's scaling: the same strain and correlation times)")
 
 
 def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) -> list[str]:
@@ -397,16 +483,17 @@ def what_was_run(points: pl.DataFrame, pool: pl.DataFrame, plan: Any, n: int) ->
         "fewer: the runaway probes, one each). States: " + ", ".join(f"{k} {v}" for k, v in sorted(
             points["state"].value_counts().iter_rows())) + ".", "",
         "**The stop rule** (`granflow.studies._campaign.cell.converged`), in stints of "
-        f"{plan.stint:g} t_c: a run counts only once it is flowing and stationary (the means "
-        "of the first and last thirds of its steady part within 3 SEs for each of I, phi, "
-        "mu1, mu2: `granflow.analysis.stats.stationarity`); it may stop only once its steady "
-        f"part spans {plan.min_length:,.0f} t_c, {plan.min_taus:g} integrated correlation "
-        "times of the slowest of I, phi, mu1, mu2 and a shear strain of "
+        f"{plan.stint:g} t_c{_scaled(plan)}: a run counts only once it is flowing and "
+        "stationary (the means of the first and last thirds of its steady part within 3 SEs "
+        "for each of I, phi, mu1, mu2: `granflow.analysis.stats.stationarity`); it may stop "
+        f"only once its steady part spans {plan.min_length:,.0f} t_c, {plan.min_taus:g} "
+        "integrated correlation times of the slowest of I, phi, mu1, mu2 and a shear strain of "
         f"{plan.min_strain:g}; only then are the SE targets consulted ("
         + ", ".join(f"{k} within {t:.0%}" for k, t in plan.targets().items())
-        + f" of its mean); at most {plan.max_steps(n):,} steps of shear. No SE rests on fewer "
-        "than 10 blocks of 2 tau: a quantity with less data has none, and its point is not "
-        "fitted.", "",
+        + f" of its mean); at most {plan.max_steps(n, P_MAIN):,} steps of shear"
+        + (f" at p_ext = {P_MAIN:.0e}" if plan.p_ref is not None else "")
+        + ". No SE rests on fewer than 10 blocks of 2 tau: a quantity with less data has "
+        "none, and its point is not fitted.", "",
         "**mu1 and mu2** project the deviatoric stress on D and on (2.4)'s D^2 tensor built "
         "from D's deviatoric part, where 002 prints (4.1) and (4.3) with D for an isochoric "
         "flow: the barostat's breathing (tr D = d ln phi/dt, zero only in the mean) otherwise "
@@ -519,6 +606,36 @@ def points_markdown(pool: pl.DataFrame) -> str:
     return "\n".join(out)
 
 
+def _remaining(points: pl.DataFrame, plan: Any, rate: float) -> list[str]:
+    """The plan's points not yet in ``points`` and their estimated core-hours (the median
+    steps of their pressure, :func:`median_steps`, at the measured ``rate``), as report
+    lines; none when the plan is done."""
+    done = {(r["mu_s"], r["N"], r["p_ext"], r["tau_ratio"], r["seed"])
+            for r in points.iter_rows(named=True)}
+    left = [q for q in plan.points if (q.mu_s, q.N, q.p_ext, q.tau_ratio, q.seed) not in done]
+    if not left:
+        return []
+    med = {p: median_steps(points, p) for p in {q.p_ext for q in left}}
+    by_p: dict[float, tuple[int, float]] = {}
+    for q in left:
+        n, h = by_p.get(q.p_ext, (0, 0.0))
+        by_p[q.p_ext] = (n + 1, h + q.N * med[q.p_ext][0] / rate / 3600)
+    parts = ", ".join(f"{n} at p = {p:.0e} (~{h:.1f} core-hours, median steps "
+                      f"{'measured' if med[p][1] else 'scaled'})"
+                      for p, (n, h) in sorted(by_p.items(), reverse=True))
+    total = sum(h for _, h in by_p.values())
+    return [f"Not yet run: {len(left)} points of the {plan.name} plan: {parts}; about "
+            f"{total:.0f} core-hours in all (`python -m granflow.studies.reproduce_002 "
+            f"--{plan.name} --out DATASET --workers 2` goes on with them; committed in "
+            "pieces).", ""]
+
+
+def _pressures(pool: pl.DataFrame, n: int) -> str:
+    """The pressures of the ``N = n`` points, highest first, as text."""
+    ps = sorted(set(pool.filter(pl.col("N") == n)["p_ext"].to_list()), reverse=True)
+    return ", ".join(f"{p:.0e}" for p in ps)
+
+
 def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path:
     """Write the markdown report for the dataset in ``out`` (campaign ``plan``) to ``path``
     (figures beside it, in ``<path stem>_figures/``), with the cost of the ``paper`` points."""
@@ -533,12 +650,13 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
     figs = plot_figures(pool, fits, figdir, n_main)
     if se.height:
         figs.append(plot_campaign_se(se, figdir / "se_vs_time.png", ("I", "phi", "mu1"),
-                                     ("mu_s", "N", "tau_ratio", "seed"),
+                                     [c for c in KEYS if c in se.columns] + ["seed"],
                                      xlabel="steady averaging time T (t_c)"))
-    # (wall time and core-hours per piece, mu_s and N)
-    per, rate = cost(points, ["mu_s", "N"], "N", "shear_steps",
+    # (wall time and core-hours per piece: pressure, mu_s and N)
+    per, rate = cost(points, ["p_ext", "N", "mu_s"], "N", "shear_steps",
                      columns=[pl.col("shear_steps").sum().alias("steps of shear")],
-                     sort=["N", "mu_s"])
+                     sort=["p_ext", "N", "mu_s"])
+    per = per.sort("p_ext", "N", "mu_s", descending=[True, False, False])
     rel = path.parent
     dataset = out.as_posix()
     lines = [f"# Reproducing 002: Table 1 and figures 3-8 ({plan.name} campaign)", "",
@@ -554,7 +672,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              *curves_section(pool, fits, n_main), "",
              "## Table 1, constant by constant", "",
              "Fits of (4.2), (4.4), (4.6), (4.7) to the replica means of every usable point at "
-             f"N = {n_main}, p_ext = {P_MAIN:g} and I <= {FIT_I_MAX:g} ("
+             f"N = {n_main}, p_ext = {_pressures(pool, n_main)} (all pressures together, as "
+             f"002) and I <= {FIT_I_MAX:g} ("
              + (", ".join(f"mu_s = {r['mu_s']:g}, tau/p = {r['tau_ratio']:g} at I = {r['I']:.2f}"
                           for r in pool.filter((pl.col("N") == n_main)
                                                & (pl.col("I") > FIT_I_MAX)).iter_rows(named=True))
@@ -567,6 +686,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              "its rows where marked), the other constants are given in §4 for mu_s = 0 and "
              "0.3 only. Constants are correlated within a law: read the curves above first.",
              "", _verdicts(rows), "", table1_markdown(rows), ""]
+    lines += collapse_section(pool, fits, n_main)
     off = offsets(pool, n_main)
     if off.height:
         lines += ["## Against the paper's curves at our I", "",
@@ -625,23 +745,29 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   "times). That is why a run may stop only after the stop rule's minimum "
                   "length; shorter stretches are for this table only.", "",
                   md_table(se_shrink(se), {}), ""]
-    # the paper points' steps: the median of our flowing N = 2000 points at p = 1e-4, times
-    # sqrt(1e-4/p) (a strain rate I sqrt(p/rho)/a takes that much longer per strain), the
-    # same count at N = 1e4 (its smaller fluctuations would need fewer: an upper estimate)
-    steps = median_steps(points)
-    est = paper_scale_estimate(paper, lambda p: p.N * steps * math.sqrt(1e-4 / p.p_ext), rate)
+    # the paper points' steps: the median of our flowing N = 2000 points at the point's
+    # pressure where measured, else at P_MAIN times sqrt(P_MAIN/p) (a strain rate
+    # I sqrt(p/rho)/a takes that much longer per strain); the same count at N = 1e4 (its
+    # smaller fluctuations would need fewer: an upper estimate)
+    medians = {p: median_steps(points, p) for p in sorted({q.p_ext for q in paper}, reverse=True)}
+    est = paper_scale_estimate(paper, lambda q: q.N * medians[q.p_ext][0], rate)
+    steps_text = "; ".join(f"{v:,.0f} at p = {p:.0e} ({'measured' if m else 'scaled'})"
+                           for p, (v, m) in medians.items())
     lines += ["## Cost", "",
               f"Measured throughput {rate:.3g} particle-steps per core-second (one thread a "
               "point, two points at a time on this 2-core machine; compaction not counted).",
-              "", md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f"}), "",
+              "", md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f",
+                                 "p_ext": ".0e"}), "",
               f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
+              *_remaining(points, plan, rate),
               "## The paper-scale campaign (recipe)", "",
               "002 runs N = 1e4, p_ext in {1e-4, 1e-5, 1e-6}, 14 mu_s, tau/p 0-1.2 and 3 "
               "realisations. `--paper` (reproduce_002.paper_plan) is that campaign over the "
               "ratios with steady flow here (8 per mu_s, interpolated between the measured "
               f"ends): {est['runs']:.0f} runs. From the median steps of our "
-              f"flowing points ({steps:,.0f} at p = 1e-4, scaled by "
-              "sqrt(1e-4/p) for the slower strain rate at lower pressure) at the measured "
+              f"flowing N = 2000 points ({steps_text}: a pressure with fewer than "
+              f"{MEDIAN_POINTS} flowing points takes p = {P_MAIN:.0e}'s median times "
+              f"sqrt({P_MAIN:.0e}/p), the slower strain rate) at the measured "
               f"throughput it needs about {est['core-hours']:,.0f} core-hours: "
               f"{est['core-hours'] / 64:,.0f} hours on 64 cores.", "",
               *dask_recipe("granflow.studies.reproduce_002", "results/paper_scale", "12:00:00")]

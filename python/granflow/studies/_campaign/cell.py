@@ -99,6 +99,17 @@ class Plan:
     material: Material = MATERIAL_002
     #: observables kept per point (OBSERVABLES, and rheology.GRADIENT_COLUMNS if wanted)
     observables: tuple[str, ...] = OBSERVABLES
+    #: the pressure at which ``stint``, ``max_shear`` and ``min_length`` are given; at a
+    #: point's own p_ext they are times sqrt(p_ref / p_ext) (:meth:`scale`). A flow's times
+    #: at a given I go as the inertial time a sqrt(rho/p), in t_c as p^-1/2: the strain per
+    #: t_c and the correlation times in t_c of a point at p = 1e-6 are 10x those at 1e-4, so
+    #: that its floor and budget in strain and correlation times stay those of p_ref. None:
+    #: the same t_c at every pressure.
+    p_ref: float | None = None
+
+    def scale(self, p_ext: float) -> float:
+        """The factor on the plan's times at pressure ``p_ext`` (``p_ref``)."""
+        return 1.0 if self.p_ref is None else math.sqrt(self.p_ref / p_ext)
 
     @property
     def dt(self) -> float:
@@ -113,9 +124,19 @@ class Plan:
         """Steps in ``t`` contact times (at least one)."""
         return max(1, round(t / self.dt))
 
-    def max_steps(self, n: int) -> int:
-        """Steps of shear after which a point of ``n`` particles stops unconverged."""
-        return self.steps(self.max_shear.get(n, max(self.max_shear.values())))
+    def max_steps(self, n: int, p_ext: float) -> int:
+        """Steps of shear after which a point of ``n`` particles at ``p_ext`` stops
+        unconverged."""
+        return self.steps(self.max_shear.get(n, max(self.max_shear.values()))
+                          * self.scale(p_ext))
+
+    def stint_steps(self, p_ext: float) -> int:
+        """Steps of a stint at ``p_ext``."""
+        return self.steps(self.stint * self.scale(p_ext))
+
+    def min_length_at(self, p_ext: float) -> float:
+        """The floor on a steady part at ``p_ext`` in t_c."""
+        return self.min_length * self.scale(p_ext)
 
     def targets(self) -> dict[str, float]:
         """Relative SE each observable must reach (SE_TARGETS x ``se_target``)."""
@@ -178,12 +199,13 @@ ARREST_STINTS = 4
 
 def long_enough(row: Mapping[str, Any], plan: Plan) -> bool:
     """Whether a flowing, stationary run's steady part spans ``plan.min_length`` contact
-    times, ``plan.min_taus`` correlation times of its slowest reported quantity and
-    ``plan.min_strain`` of shear: the minimum length before any SE target is consulted."""
+    times (at the row's p_ext: :meth:`Plan.min_length_at`), ``plan.min_taus`` correlation
+    times of its slowest reported quantity and ``plan.min_strain`` of shear: the minimum
+    length before any SE target is consulted."""
     t_avg = row.get("T_avg", 0.0)  # (kernel time, as tau_max; T_avg_tc in t_c)
     tau = row.get("tau_max", math.nan)
     return bool(row["state"] == "flowing" and math.isfinite(tau)
-                and row.get("T_avg_tc", 0.0) >= plan.min_length
+                and row.get("T_avg_tc", 0.0) >= plan.min_length_at(row["p_ext"])
                 and t_avg >= plan.min_taus * tau
                 and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
 
@@ -251,8 +273,8 @@ class CellStudy(Study):
                          sample_every=plan.sample_every, threads=threads)
 
     def next_steps(self, scene: Any, point: Point, plan: Plan) -> int:
-        left = plan.max_steps(point.N) - _shear_steps(scene)
-        return min(plan.steps(plan.stint), left) if left > 0 else 0
+        left = plan.max_steps(point.N, point.p_ext) - _shear_steps(scene)
+        return min(plan.stint_steps(point.p_ext), left) if left > 0 else 0
 
     def context(self, scene: Any) -> dict[str, Any]:
         return {"shear_start_time": float(scene.shear_start_time or 0.0)}
@@ -283,9 +305,9 @@ class CellStudy(Study):
         if row["converged"]:
             return "converged"
         if (row["state"] == "arrested"
-                and row["shear_steps"] >= ARREST_STINTS * plan.steps(plan.stint)):
+                and row["shear_steps"] >= ARREST_STINTS * plan.stint_steps(point.p_ext)):
             return "arrested"
-        if row["shear_steps"] >= plan.max_steps(point.N):
+        if row["shear_steps"] >= plan.max_steps(point.N, point.p_ext):
             return "budget"
         return None
 
