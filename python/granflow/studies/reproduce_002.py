@@ -68,8 +68,9 @@ def full_plan() -> Plan:
     At p_ext = 1e-4: the ratios of RATIOS, MORE_RATIOS and NEAR_YIELD, then a runaway probe
     per mu_s of RUNAWAY (one seed). Then the lower pressures at the ratios of RATIOS and
     MORE_RATIOS (without the near-yield ratios, which arrest at 1e-4, and the runaway probes):
-    mu_s = 0 and 0.3 at 1e-5, then at 1e-6 (002's collapse panels and the curve comparison),
-    the size check (N = 10,000 at SIZE_CHECK), then the other mu_s at 1e-5 and at 1e-6.
+    mu_s = 0 and 0.3 at 1e-5, the size check (N = 10,000 at SIZE_CHECK), mu_s = 0 and 0.3 at
+    1e-6 (with 1e-5: 002's collapse panels and the curve comparison), then the other mu_s at
+    1e-5 and at 1e-6.
 
     Ordered so that a campaign stopped part way (it is split over sessions) leaves whole
     pieces: a ratio's seeds one after another, fast flows before slow ones. The plan's times
@@ -91,9 +92,9 @@ def full_plan() -> Plan:
         return [Point(mu, r, seed, p_ext=p) for mu in mus for r in low[mu] for seed in seeds]
 
     others = [mu for mu in low if mu not in CURVE_MU]
-    for p in PRESSURES[1:]:
-        pts += at(p, CURVE_MU)
+    pts += at(PRESSURES[1], CURVE_MU)
     pts += [Point(mu, r, seed, N=10_000) for mu, r in SIZE_CHECK.items() for seed in seeds]
+    pts += at(PRESSURES[2], CURVE_MU)
     for p in PRESSURES[1:]:
         pts += at(p, others)
     # (2,000,000 steps at 1e-4: the slowest flows near yield stop there, with the SEs they
