@@ -13,6 +13,8 @@
 * :mod:`.channel_profiles` — vertical channel, paper 000 (Debnath, Kesava Rao & Kumaran
   2022): flow state and steady profiles with jackknife SEs.
 * :mod:`.channel` — the same paper's model curves, velocity scaling, zones, rheology, summary.
+* :mod:`.order` — bond-orientational order (Steinhardt Q6, crystal-like fraction) of a
+  packing, bin by bin (the channel's plug: crystal or dense amorphous?).
 * :mod:`.rheology` — stress-controlled cell, paper 002 (Srivastava et al.), Table 1.
 * :mod:`.report` — SE of a run's key figures against averaging and wall time.
 * :mod:`.plots` — the papers' figures, error / work-precision plots and a run directory's
@@ -28,6 +30,7 @@ from . import (
     coverage,
     estimate,
     laws,
+    order,
     plots,
     replicas,
     rheology,
@@ -101,6 +104,7 @@ __all__ = [
     "coverage",
     "estimate",
     "laws",
+    "order",
     "plots",
     "replicas",
     "rheology",

@@ -48,6 +48,7 @@ from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 import numpy as np
+import polars as pl
 import pyarrow as pa
 
 from granflow import _core
@@ -590,6 +591,22 @@ class Channel(SceneParameters):
             elif isinstance(v, (int, float, str, bool)):
                 out[k] = v
         return out
+
+    def order_profile(self, edges: np.ndarray | None = None, cutoff: float | None = None
+                      ) -> pl.DataFrame:
+        """Bond-orientational order of the present configuration across x
+        (:func:`granflow.analysis.order.bin_profile`: Q6, crystal-like fraction, coordination
+        per bin), in ``edges`` (default :meth:`bin_edges`), bonds within ``cutoff`` (default
+        :data:`granflow.analysis.order.CUTOFF`) times the pair's mean diameter; x bounded by the
+        walls, y and z periodic. After :meth:`prepare`, :meth:`run` or :meth:`restore` (before, a
+        :class:`granflow.ConfigurationError`)."""
+        from granflow.analysis.order import CUTOFF, bin_profile
+
+        sim = self._simulation()
+        return bin_profile(sim.get_positions(), np.asarray(self.core.diameters()),
+                           self.bin_edges() if edges is None else edges,
+                           (self.W, self.H, self.B), (False, True, True), axis=0,
+                           cutoff=CUTOFF if cutoff is None else cutoff)
 
     def save_checkpoint(self, path: str | os.PathLike[str]) -> None:
         """The kernel state and the preparation's record (:func:`write_checkpoint`)."""
