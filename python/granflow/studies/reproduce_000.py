@@ -293,7 +293,7 @@ class ChannelStudy(Study):
         from granflow.scenes.channel import Channel
 
         return Channel(W=point.W, H=point.H, B=point.B, phi_bar=point.phi_bar, kn=point.kn,
-                       dt=point.dt, seed=point.seed, threads=threads,
+                       dt=point.dt, seed=point.seed, threads=threads, preparation="pour",
                        sample_every=max(1, round(SAMPLE_DT / point.dt)), window=WINDOW)
 
     def start(self, scene: Any, point: Point, plan: Plan, work: Path) -> None:
