@@ -86,8 +86,8 @@ def test_a_phi_bar_the_rain_cannot_pack_is_refused_naming_the_largest_that_fits(
     fits = float(re.search(r"allowed phi_bar <= (0\.\d{3})", msg).group(1))
     assert 0.45 < fits < 0.6
     assert not c.prepared  # refused before the run's simulation exists: nothing ran
-    # the largest that fits does fit (the same channel, seed and so the same rain statistics)
-    ok = Channel(**RAIN, phi_bar=fits - 0.02, seed=2)
+    # the largest that fits does fit here (an estimate within the rain's randomness, ~0.01)
+    ok = Channel(**RAIN, phi_bar=fits, seed=2)
     ok.prepare(progress=False)
     assert ok.prep_info["bed_top"] <= ok.H
 

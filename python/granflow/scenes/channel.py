@@ -31,7 +31,8 @@ take N from phi_bar (whole particles: N <V_p> = phi_bar W B H to the nearest par
 * refusal: the bed fills H - Delta H with Delta H = H - (its top). A bed taller than H (phi_bar
   above what the rain packs in this channel) is refused by ``prepare``, before the run's
   simulation exists: a ParameterError naming phi_bar and the largest phi_bar that fits, the
-  bed's own fraction up to its top, V_s/(W B top) (rounded down to 3 decimals);
+  bed's own fraction up to its top, V_s/(W B top), rounded down to 3 decimals (an estimate:
+  rains of other seeds or counts differ by ~0.01);
 * release (``_release``): the floor goes, y becomes periodic with period H (Delta H stays empty
   above the bed's top), the velocities start at zero (the bed was at rest, below
   ``settle_ke``) and the tangential histories at zero; law and dt are the rain's.
@@ -546,7 +547,9 @@ class Channel(SceneParameters):
         area = self.W * self.B
         phi_bed = p.vs / (area * top)
         if top > self.H:
-            # a bed of this phi_bar's particles filling exactly H holds phi_bar = phi_bed
+            # a bed of this phi_bar's particles filling exactly H would hold phi_bed (a
+            # shorter bed packs a little looser up to its rough top: the rain's randomness,
+            # ~0.01 between seeds, is larger)
             fits = np.floor(phi_bed * 1000) / 1000
             raise ParameterError(
                 f"invalid phi_bar = {self.phi_bar!r}: allowed phi_bar <= {fits:.3f}, the "
