@@ -38,7 +38,8 @@ take N from phi_bar (whole particles: N <V_p> = phi_bar W B H to the nearest par
   ``settle_ke``) and the tangential histories at zero; law and dt are the rain's.
   ``prep_info`` records the bed's top, Delta H, the bed's fraction up to its top
   (``phi_bed``) and in its core (``phi_bed_core``: centres between 2 d_max above the floor and
-  3 d_max below the top, away from the floor's layering and the rough top).
+  3 d_max below the top, away from the floor's layering and the rough top; None in a bed
+  too short to have one).
 
 ``preparation = "pour"`` (the former default, kept bit for bit: the committed 000 campaign and
 the benchmarks that record a channel were prepared with it):
@@ -216,8 +217,8 @@ class Channel(SceneParameters):
             docstring).
         rain_phi: The volume fraction of the dilute random column the rain falls from
             (``preparation = "rain"``): a more dilute rain falls from higher, arrives at a lower
-            rate and faster, and packs denser (docs/channel.md, "Preparation"), at the cost of
-            a longer fall.
+            rate and a higher speed, and packs denser (docs/channel.md, "Preparation"), at the
+            cost of a longer fall.
     """
 
     W: float = 20.0
@@ -561,8 +562,8 @@ class Channel(SceneParameters):
         y, dmax = p.x[:, 1], float(p.d.max())
         lo, hi = RAIN_CORE_BOTTOM * dmax, top - RAIN_CORE_TOP * dmax
         core = (y >= lo) & (y < hi)
-        phi_core = (solid_volume(p.d[core]) / (area * (hi - lo)) if hi - lo >= dmax
-                    else float("nan"))
+        # (None: a bed too short to have a core)
+        phi_core = solid_volume(p.d[core]) / (area * (hi - lo)) if hi - lo >= dmax else None
         done = say(f"released: {len(p.d)} spheres, phi_bar = {phi_bar:.4f}, bed top "
                    f"{top:.4g} (Delta H = {self.H - top:.3g}, bed phi {phi_bed:.4f})")
         self._release(p.x, p.d, {
