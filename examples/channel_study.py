@@ -33,7 +33,7 @@ def main() -> None:
     ap.add_argument("--max-time", type=float, default=600.0, help="stop after this time")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--seed", type=int, default=1)
-    # the soft pour by default: 000's rain packs only ~0.58 up to its top at H = 30
+    # the soft pour by default: 000's rain packs only ~0.59 up to its top at H = 30
     # (docs/channel.md, "Preparation"); --preparation rain with a phi_bar it can pack
     ap.add_argument("--preparation", choices=["rain", "pour"], default="pour")
     a = ap.parse_args()
