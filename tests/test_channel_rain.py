@@ -127,3 +127,11 @@ def test_pour_is_bit_for_bit_the_former_preparation(kw, n, digest):
     c.prepare(progress=False)
     assert c.core.n == n and c.prep_info["preparation"] == "pour"
     assert _digest(c) == digest
+
+
+def test_rain_record_survives_a_checkpoint(rained, tmp_path):
+    rained.save_checkpoint(tmp_path / "c.gfck")
+    b = Channel(**RAIN, phi_bar=0.5, seed=2)
+    b.restore(tmp_path / "c.gfck")
+    assert b.prep_info == rained.prep_info and b.prep_info["preparation"] == "rain"
+    assert np.array_equal(b.core.positions(), rained.core.positions())
