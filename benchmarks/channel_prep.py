@@ -2,6 +2,7 @@
 the stages as the preparation prints them, and the wall and CPU seconds.
 
     python benchmarks/channel_prep.py [--W 100 --B 40 --H 60 --phi 0.6 --kn 1e6 --threads 2]
+           [--preparation rain|pour] [--rain-phi 0.05]
 
 Issue 22 asks for a paper-size channel (W = 100, B = 40, H = 60: ~2.7e5 spheres) prepared and
 released in minutes. Results are appended to benchmarks/out/channel_prep.jsonl.
@@ -27,10 +28,15 @@ def main() -> None:
     ap.add_argument("--kn", type=float, default=1e6)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--preparation", choices=["rain", "pour"], default="rain",
+                    help="000's rain (the default) or the soft pour (timed on 2026-11-26)")
+    ap.add_argument("--rain-phi", type=float, default=None,
+                    help="the rain column's volume fraction (None: Channel's default)")
     a = ap.parse_args()
     # dt: the material's rule, 000's 1.2e-4 sqrt(1e6/kn)
+    extra = {} if a.rain_phi is None else {"rain_phi": a.rain_phi}
     ch = Channel(W=a.W, B=a.B, H=a.H, phi_bar=a.phi, kn=a.kn, seed=a.seed, threads=a.threads,
-                 sample_every=None)
+                 sample_every=None, preparation=a.preparation, **extra)
     cpu0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     ch.prepare(progress=True)

@@ -216,7 +216,7 @@ def main() -> None:
     if todo:
         # one packing for every k_n: poured at the softest prep stiffness, released at rest
         src = Channel(W=a.W, H=a.H, B=a.B, phi_bar=a.phi, kn=max(kns), dt=dt_for(max(kns)),
-                      seed=a.seed, threads=1)
+                      seed=a.seed, threads=1, preparation="pour")  # the recorded packing
         src.prepare()
         print(f"prepared: {src.prep_info}", flush=True)
         for kn, f in todo:

@@ -76,7 +76,8 @@ def channel_state(flow_steps: int = FLOW_STEPS, seed: int = 1, threads: int = 1)
     if not f.exists():
         t0 = time.perf_counter()
         ch = Channel(W=W, H=H, B=B, phi_bar=PHI_BAR, kn=KN, e_n=E_N, mu=MU, dt=DT, skin=SKIN,
-                     density=DENSITY, seed=seed, threads=threads)
+                     density=DENSITY, seed=seed, threads=threads,
+                     preparation="pour")  # the recorded comparison's packing
         ch.prepare(progress=False)
         s = ch.core
         s.run(flow_steps)

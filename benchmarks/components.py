@@ -55,7 +55,8 @@ def main() -> None:
         s = gf.Simulation(x, d, box, gf.ContactLaw(kn=1e6, e_n=0.82, mu=mu), velocities=v,
                           dt=1.2e-4, skin=0.2, threads=a.threads)
         rows.append(report(f"periodic packing, mu = {mu}", s.core, a.steps))
-    ch = Channel(W=20, H=30, B=10, phi_bar=0.6, kn=1e6, seed=1, threads=a.threads)
+    ch = Channel(W=20, H=30, B=10, phi_bar=0.6, kn=1e6, seed=1, threads=a.threads,
+                 preparation="pour")  # the recorded timings' packing
     ch.prepare()
     rows.append(report("channel (walls, gravity)", ch.core, a.steps))
     cell = ShearCell(N=6000, p_ext=1e-4, tau_ratio=0.5, seed=1, threads=a.threads)

@@ -106,7 +106,8 @@ def make_channel(every: int | None, window: int, threads: int) -> Channel:
     # k_t: the kernel's default 2/7 kn (one ulp from LAMMPS's KT = KN * 2 / 7 at kn = 1e5)
     return Channel(W=W, H=H, B=B, phi_bar=0.6, kn=KN, e_n=E_N, mu=MU, dt=DT, skin=SKIN,
                    seed=SEED, bin_width=1.0, wall_bin=1.0, sample_every=every,
-                   window=window, threads=threads)
+                   window=window, threads=threads,
+                   preparation="pour")  # the recorded throughput's packing
 
 
 def channel_state(flow_steps: int) -> State:

@@ -33,6 +33,9 @@ def main() -> None:
     ap.add_argument("--max-time", type=float, default=600.0, help="stop after this time")
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--seed", type=int, default=1)
+    # the soft pour by default: 000's rain packs only ~0.59 up to its top at H = 30
+    # (docs/channel.md, "Preparation"); --preparation rain with a phi_bar it can pack
+    ap.add_argument("--preparation", choices=["rain", "pour"], default="pour")
     a = ap.parse_args()
     dt = MATERIAL_000.with_(kn=a.kn).dt()  # 000's rule: 1.2e-4 at kn = 1e6, scaled with t_c
     assert dt is not None
@@ -40,7 +43,7 @@ def main() -> None:
         "scene": "channel",
         "seed": a.seed,
         "params": {"W": a.W, "H": a.H, "B": a.B, "phi_bar": a.phi, "kn": a.kn,
-                   "sample_every": 200, "window": 25},
+                   "sample_every": 200, "window": 25, "preparation": a.preparation},
         "run": {"steps": 0, "checkpoint_every": int(round(a.chunk_time / dt))},
         "output": {},
     }

@@ -72,6 +72,8 @@ REFUSED = [
     ({"settle_ke": 0.0}, "settle_ke"),
     ({"settle_ke": NAN}, "settle_ke"),
     ({"prep_kn": -1.0}, "prep_kn"),
+    ({"preparation": "drop"}, "preparation"),
+    ({"preparation": None}, "preparation"),
     ({"skin": 0.0}, "skin"),
     ({"skin": INF}, "skin"),
     ({"seed": -1}, "seed"),
@@ -102,6 +104,7 @@ ACCEPTED = [
     {"W": 5.5, "H": 5.5, "B": 3.4, "phi_bar": 0.011},  # two particles
     {"e_n": 1.0, "mu": 0.0, "wall_mu": 0.0, "wall_e_n": 1.0, "seed": 0},
     {"dt": t_c() / 10},
+    {"preparation": "pour"},
     {"kn": 1e5, "dt": t_c(1e5) / 10, "form": "hertz"},
     # the step the repository uses: 1.2e-4 sqrt(1e6/kn) ~ t_c/11.5
     *({"kn": kn, "dt": 1.2e-4 * math.sqrt(1e6 / kn)} for kn in (1e5, 1e6, 1e7, 1e8)),
@@ -127,7 +130,7 @@ def test_allowed_edge_values_are_accepted(kw):
 # ~0.57 up to the bed's top; squeezed to 0.62 it relaxes to max overlap 0.007 (seed 1), to 0.64
 # it keeps 0.020 d
 SMALL = {"W": 10.0, "H": 8.0, "B": 5.0, "kn": 1e5, "dt": 3.79e-4, "sample_every": None,
-         "threads": 1, "seed": 1}
+         "threads": 1, "seed": 1, "preparation": "pour"}
 
 
 def test_prepare_refuses_a_phi_bar_this_channel_cannot_pack():

@@ -22,7 +22,7 @@ def _bench():
 
 
 def test_prepare_from_reuses_the_packing():
-    geo = {"W": 10.0, "H": 10.0, "B": 4.0, "phi_bar": 0.58}
+    geo = {"W": 10.0, "H": 10.0, "B": 4.0, "phi_bar": 0.58, "preparation": "pour"}
     src = Channel(**geo, kn=1e6, seed=0, threads=1)
     src.prepare()
     soft = Channel(**geo, kn=1e5, dt=3.8e-4, seed=5, threads=1)

@@ -103,7 +103,7 @@ def test_channel_run_summary_and_plots(tmp_path, capsys):
         "scene": "channel",
         "seed": 1,
         "params": {"W": 8, "H": 12, "B": 4, "phi_bar": 0.6, "kn": 1e5, "dt": 3e-4,
-                   "sample_every": 20, "window": 5},
+                   "sample_every": 20, "window": 5, "preparation": "pour"},
         "run": {"steps": 2000, "checkpoint_every": 1000},
         "output": {},
     }
@@ -180,7 +180,7 @@ def test_duckdb_and_polars_lazy_scan_read_a_sweeps_channel_tables(tmp_path):
     duckdb = pytest.importorskip("duckdb")
     base = {"scene": "channel",
             "params": {"W": 6.0, "H": 8.0, "B": 3.5, "phi_bar": 0.6, "kn": 1e5, "dt": 3e-4,
-                       "sample_every": 10, "window": 5},
+                       "sample_every": 10, "window": 5, "preparation": "pour"},
             "run": {"steps": 300}, "output": {}}
     df = run_grid(base, {"mu": [0.2, 0.5]}, tmp_path, seeds=[1], workers=2)
     assert set(df["status"]) == {"finished"}

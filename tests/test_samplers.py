@@ -26,8 +26,9 @@ RTOL = 1e-11
 
 
 def small_channel(**kw) -> Channel:
+    # (the soft pour: it packs phi_bar = 0.61 in this small channel, the rain does not)
     base = dict(W=8, H=12, B=4, phi_bar=0.61, kn=1e5, dt=3e-4, seed=2, sample_every=5,
-                window=4)
+                window=4, preparation="pour")
     return Channel(**{**base, **kw})
 
 

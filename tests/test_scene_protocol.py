@@ -13,8 +13,9 @@ FACTORIES = {
     "gas": lambda: PeriodicGas(L=6.0, sample_every=50, seed=2),
     "cell": lambda: ShearCell(N=60, sample_every=50, seed=2),
     "rate_cell": lambda: RateCell(N=60, sample_every=50, seed=2),
+    # (the soft pour: it packs phi_bar = 0.6 in this tiny channel, the rain does not)
     "channel": lambda: Channel(W=6, H=8, B=3.5, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4,
-                               sample_every=50, window=4),
+                               sample_every=50, window=4, preparation="pour"),
 }
 
 
@@ -76,7 +77,8 @@ def test_one_vocabulary_across_scenes(scene_kind):
     # kernel's law, and parameters() and summary() report them under the same keys
     cls = type(FACTORIES[scene_kind]())
     base = {"gas": {"L": 6.0}, "cell": {"N": 60}, "rate_cell": {"N": 60},
-            "channel": {"W": 6, "H": 8, "B": 3.5, "kn": 1e5}}[scene_kind]
+            "channel": {"W": 6, "H": 8, "B": 3.5, "kn": 1e5,
+                        "preparation": "pour"}}[scene_kind]
     sc = cls(**base, **SHARED, dt=1e-4, sample_every=50, seed=3)
     sc.prepare()
     law = sc.core.law()

@@ -3,9 +3,46 @@
 Polydisperse frictional spheres between two flat frictional walls at x = 0 and x = W, periodic
 in y (vertical; gravity along -y) and z. Units: d (mean diameter), rho_p, sqrt(d/g).
 
-Preparation (paper fig. 2, "fill and release"): spheres are placed at random in a tall region
-above a floor, poured under gravity and settled; then the floor is removed and y made periodic
-with period H. Protocol details that the paper leaves open, and our choices:
+Preparation (paper §2, fig. 2, "fill and release"): "Initially, a flat surface is placed at the
+bottom of the channel. The channel is filled by raining the particles uniformly under the effect
+of gravity up to a height H - Delta H. After the particles settle, the bottom is removed and the
+periodic boundary conditions are imposed". ``preparation`` picks one of two protocols; both
+take N from phi_bar (whole particles: N <V_p> = phi_bar W B H to the nearest particle, the
+30/40/30 % mix by exact number fractions), so the achieved phi_bar is exact:
+(total particle volume) / (W H B).
+
+``preparation = "rain"`` (the default; 000's protocol):
+
+* rain (``_rain``): the N spheres are placed at random (``_core.insert_spheres``) in a dilute
+  column at volume fraction ``rain_phi`` (default 0.05) over the whole W x B section, from the
+  floor (a wall at y = 0) up to h_col = V_s/(W B rain_phi) + 2 d_max, and released at once
+  under gravity with the run's own laws: the particles' (kn, k_t, e_n, friction, damping, form)
+  and the particle-wall law (``wall_*``) on the side walls and on the floor, at the run's dt.
+  The kernel cannot insert particles during a run, so the rain is one column released at once
+  rather than a stream: every sphere falls freely at the same acceleration, the column keeps
+  its concentration until it lands, and so it lands on the growing bed as a uniform rain of
+  flux ~ rain_phi sqrt(2 g h), lowest spheres first. ``rain_phi`` sets how the rain packs (a
+  more dilute column arrives at a lower rate and a higher speed, and packs denser; docs/channel.md,
+  "Preparation") and what it costs (the fall time sqrt(2 h_col) ~ rain_phi^-1/2);
+* settle: checked every ``SETTLE_CHECK_TIME``; the bed is at rest when the kinetic energy per
+  particle is below ``settle_ke`` m g d after the fall time sqrt(2 h_col), and its top (the
+  highest sphere's top) moved less than ``RAIN_TOP_TOL`` = 0.01 d since the last check
+  (giving up, as the pour, after ``SETTLE_T_BASE`` + ``SETTLE_T_FALLS`` t_fall);
+* refusal: the bed fills H - Delta H with Delta H = H - (its top). A bed taller than H (phi_bar
+  above what the rain packs in this channel) is refused by ``prepare``, before the run's
+  simulation exists: a ParameterError naming phi_bar and the largest phi_bar that fits, the
+  bed's own fraction up to its top, V_s/(W B top), rounded down to 3 decimals (an estimate:
+  rains of other seeds or counts differ by ~0.01);
+* release (``_release``): the floor goes, y becomes periodic with period H (Delta H stays empty
+  above the bed's top), the velocities start at zero (the bed was at rest, below
+  ``settle_ke``) and the tangential histories at zero; law and dt are the rain's.
+  ``prep_info`` records the bed's top, Delta H, the bed's fraction up to its top
+  (``phi_bed``) and in its core (``phi_bed_core``: centres between 2 d_max above the floor and
+  3 d_max below the top, away from the floor's layering and the rough top; None in a bed
+  too short to have one).
+
+``preparation = "pour"`` (the former default, kept bit for bit: the committed 000 campaign and
+the benchmarks that record a channel were prepared with it):
 
 * pour (``_pour``): from a random insertion at phi = ``PHI_INSERT`` = 0.3, frictionless, with
   min(kn, prep_kn = 1e4), e_n = ``POUR_E_N`` = 0.3, dt = t_c/``POUR_DT_DIVISOR`` = t_c/20 for
@@ -25,8 +62,7 @@ with period H. Protocol details that the paper leaves open, and our choices:
   the bed keeps overlaps of 0.017-0.019 d at W = 8-10 d, 0.008 d at W = 20 d) and ``prepare``
   refuses phi_bar (docs/channel.md, "Input checks");
 * release (``_release``): the floor goes, y becomes periodic with period H, the run's law and
-  dt apply;
-* the achieved phi_bar is exact: (total particle volume) / (W H B) with whole particles.
+  dt apply.
 
 Statistics (000 eqs 2.1–2.5) are taken inside the kernel's step loop (``granflow._core``
 samplers ``channel_bins`` and ``channel_series``, src/sampling/channel.rs): every
@@ -97,6 +133,19 @@ RELAX_ROUND_STEPS = 100
 #: the inserted region is taller than the solid needs by HEADROOM_DMAX d_max
 HEADROOM_DMAX = 2
 
+# -- the rain's protocol (module docstring) ----------------------------------------------------
+#: the preparations ``Channel.preparation`` allows: 000's rain (the default) and the soft pour
+PREPARATIONS = ("rain", "pour")
+#: the rained bed is at rest when, besides the kinetic-energy test, its top moved less than
+#: RAIN_TOP_TOL d over the last SETTLE_CHECK_TIME
+RAIN_TOP_TOL = 0.01
+#: the densest column ``rain_phi`` allows (denser, the column lands as a slab, not as rain)
+RAIN_PHI_MAX = 0.3
+#: the bed's core, for ``prep_info["phi_bed_core"]``: the particles with centres between
+#: RAIN_CORE_BOTTOM d_max above the floor and RAIN_CORE_TOP d_max below the bed's top
+RAIN_CORE_BOTTOM = 2.0
+RAIN_CORE_TOP = 3.0
+
 
 class _Stages:
     """The preparation's stages, one line each on stderr (when ``progress``, or None and
@@ -159,9 +208,18 @@ class Channel(SceneParameters):
         sample_every: Steps between two samples of the ``bins`` and ``series`` tables (None: no
             statistics).
         window: Samples averaged into one row of the ``bins`` table.
-        settle_ke: The pour is settled when the kinetic energy per particle is below this, in
-            m g d.
-        prep_kn: The soft pour's stiffness (the pour uses min(kn, prep_kn)).
+        settle_ke: The rain (or pour) is settled when the kinetic energy per particle is below
+            this, in m g d.
+        prep_kn: The soft pour's stiffness (``preparation = "pour"`` only; the pour uses
+            min(kn, prep_kn)).
+        preparation: How :meth:`prepare` packs the channel: ``"rain"`` (000's protocol, fig. 2:
+            rained with the run's own laws onto a temporary floor, filling H - Delta H) or
+            ``"pour"`` (the soft frictionless pour, then a squeeze into H; the module
+            docstring).
+        rain_phi: The volume fraction of the dilute random column the rain falls from
+            (``preparation = "rain"``): a more dilute rain falls from higher, arrives at a lower
+            rate and a higher speed, and packs denser (docs/channel.md, "Preparation"), at the
+            cost of a longer fall.
     """
 
     W: float = 20.0
@@ -177,6 +235,8 @@ class Channel(SceneParameters):
     window: int = 50
     settle_ke: float = 1e-4
     prep_kn: float = 1e4
+    preparation: str = "rain"
+    rain_phi: float = 0.05
 
     scene_name: ClassVar[str]
     default_material: ClassVar[Material] = MATERIAL_000
@@ -216,6 +276,11 @@ class Channel(SceneParameters):
         dmax = sd.max
         for name in ("settle_ke", "prep_kn"):
             positive(name)
+        need(isinstance(self.preparation, str) and self.preparation in PREPARATIONS,
+             "preparation", self.preparation,
+             " or ".join(repr(p) for p in PREPARATIONS) + " (000's rain, or the soft pour)")
+        need(real(self.rain_phi) and 0 < self.rain_phi <= RAIN_PHI_MAX, "rain_phi",
+             self.rain_phi, f"0 < rain_phi <= {RAIN_PHI_MAX} (a dilute column)")
         # a wall value left at None is the particle value; 0 is not "unset"
         need(self.wall_kn is None or (real(self.wall_kn) and self.wall_kn > 0), "wall_kn",
              self.wall_kn, "a finite number > 0, or None for kn")
@@ -415,12 +480,110 @@ class Channel(SceneParameters):
         return stiff_sim.get_positions()
 
     def prepare(self, progress: bool | None = None) -> None:
-        """Fill and release (see the module docstring): pour, then squeeze (a bed taller than
-        H) or relax (a soft pour at a stiffer run), then release. Does nothing if the channel
-        is prepared already (or restored from a checkpoint)."""
+        """Fill and release (see the module docstring) by ``preparation``: ``"rain"`` rains the
+        particles with the run's laws onto a floor and settles them; ``"pour"`` pours them
+        soft and frictionless, then squeezes (a bed taller than H) or relaxes (a soft pour at a
+        stiffer run); both then release. Refuses (ParameterError naming ``phi_bar``, before
+        the run's simulation exists) a phi_bar the preparation cannot pack in this channel.
+        Does nothing if the channel is prepared already (or restored from a checkpoint)."""
         if self._sim is not None:
             return
         say = _Stages(progress)
+        if self.preparation == "rain":
+            self._prepare_rain(say)
+        else:
+            self._prepare_pour(say)
+
+    def _rain(self, say: _Stages) -> _Pour:
+        """Rain, stage 1: a dilute random column (``rain_phi``) above a floor, released at once
+        under gravity with the run's laws (particles and walls, the floor a wall) and dt, until
+        the bed is at rest: kinetic energy per particle below ``settle_ke`` m g d, after the
+        fall time, and its top still within RAIN_TOP_TOL d of the last check."""
+        vol_target = self.phi_bar * self.W * self.H * self.B
+        d = self.size_dist().diameters_for_volume(vol_target, self.seed)
+        vs = solid_volume(d)
+        h_col = vs / (self.W * self.B * self.rain_phi) + HEADROOM_DMAX * d.max()
+        x = np.asarray(_core.insert_spheres(
+            d, (0.0, 0.0, 0.0), (self.W, h_col, self.B), (False, False, True), self.seed))
+        walls = [Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0), Wall(1, 0.0, 1.0)]
+        dt = self.timestep
+        assert dt is not None  # (validated)
+        box = Box(length=(self.W, h_col, self.B), periodic=(False, False, True))
+        sim = Simulation(x, d, box, self.law, walls=walls, wall_law=self.wall_law,
+                         gravity=self.gravity, dt=dt, threads=self.threads,
+                         density=self.mat.density, skin=self.mat.skin)
+        m = sim.core.masses()
+        r = d / 2
+        say(f"inserted {len(d)} spheres at phi = {self.rain_phi:g} in a {self.W:g} x {h_col:.4g} x "
+            f"{self.B:g} column; raining (the run's laws, kn = {self.law.kn:g}, "
+            f"dt = {dt:.3g})")
+        t_fall = float(np.sqrt(2 * h_col))
+        t_max = SETTLE_T_BASE + SETTLE_T_FALLS * t_fall
+        check = max(int(SETTLE_CHECK_TIME / dt), 1)
+        ke, top_before = np.inf, np.inf
+        while sim.time < t_max:
+            sim.run(check, progress=False)
+            ke = sim.energies()["kinetic_translational"] / len(d) / float(np.mean(m))
+            top = float(np.max(sim.get_positions()[:, 1] + r))
+            if (ke < self.settle_ke and sim.time > t_fall
+                    and abs(top - top_before) < RAIN_TOP_TOL):
+                break
+            top_before = top
+        else:
+            raise ParameterError(
+                f"invalid settle_ke = {self.settle_ke}: the rained bed did not settle within "
+                f"t = {t_max:.0f} sqrt(d/g) (kinetic energy per particle {ke:.2e} m g d); "
+                "allowed a larger value"
+            )
+        return _Pour(d, sim.get_positions(), h_col, vs, self.law, dt, walls, float(sim.time),
+                     sim.step, float(ke))
+
+    def _prepare_rain(self, say: _Stages) -> None:
+        """000's fill and release: rain (:meth:`_rain`); refuse a bed taller than H; release
+        (the floor goes, Delta H = H - bed top stays empty)."""
+        p = self._rain(say)
+        settled = say(f"settled: kinetic energy per particle {p.ke:.2e} < settle_ke = "
+                      f"{self.settle_ke:g} m g d, bed top still, at t = {p.time:.1f} "
+                      f"sqrt(d/g), {p.steps} steps")
+        top = float(np.max(p.x[:, 1] + p.d / 2))
+        area = self.W * self.B
+        phi_bed = p.vs / (area * top)
+        if top > self.H:
+            # a bed of this phi_bar's particles filling exactly H would hold phi_bed (a
+            # shorter bed packs a little looser up to its rough top: the rain's randomness,
+            # ~0.01 between seeds, is larger)
+            fits = np.floor(phi_bed * 1000) / 1000
+            raise ParameterError(
+                f"invalid phi_bar = {self.phi_bar!r}: allowed phi_bar <= {fits:.3f}, the "
+                f"largest the rain packs in this channel (the settled bed reaches y = "
+                f"{top:.3f} > H = {self.H:g}, packing {phi_bed:.4f} up to its top): a lower "
+                "phi_bar, or preparation = 'pour' (squeezed into H)")
+        phi_bar = p.vs / (area * self.H)
+        # the bed away from the floor's layering and the rough top (centres in the slab)
+        y, dmax = p.x[:, 1], float(p.d.max())
+        lo, hi = RAIN_CORE_BOTTOM * dmax, top - RAIN_CORE_TOP * dmax
+        core = (y >= lo) & (y < hi)
+        # (None: a bed too short to have a core)
+        phi_core = solid_volume(p.d[core]) / (area * (hi - lo)) if hi - lo >= dmax else None
+        done = say(f"released: {len(p.d)} spheres, phi_bar = {phi_bar:.4f}, bed top "
+                   f"{top:.4g} (Delta H = {self.H - top:.3g}, bed phi {phi_bed:.4f})")
+        self._release(p.x, p.d, {
+            "preparation": "rain",
+            "n": int(len(p.d)),
+            "phi_bar_achieved": phi_bar,
+            "bed_top": top,
+            "delta_H": self.H - top,
+            "phi_bed": phi_bed,
+            "phi_bed_core": phi_core,
+            "rain_phi": self.rain_phi,
+            "settle_time": p.time,
+            "settle_ke": p.ke,
+            "rain_seconds": settled,
+            "seconds": done,
+        })
+
+    def _prepare_pour(self, say: _Stages) -> None:
+        """The soft pour (:meth:`_pour`), then squeeze or relax, then release."""
         p = self._pour(say)
         settled = say(f"settled: kinetic energy per particle {p.ke:.2e} < settle_ke = "
                       f"{self.settle_ke:g} m g d (after t >= sqrt(2 h_fill)) at t = "
@@ -439,6 +602,7 @@ class Channel(SceneParameters):
                    f"({'squeezed into H' if compressed else 'bed top'} "
                    f"{min(top, self.H):.4g}); relaxation {say.elapsed - settled:.1f} s")
         self._release(x, p.d, {
+            "preparation": "pour",
             "n": int(len(p.d)),
             "phi_bar_achieved": vs / (self.W * self.H * self.B),
             "bed_top": top,

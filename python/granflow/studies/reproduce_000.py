@@ -7,7 +7,8 @@ the report docs/reproduce_000.md.
            [--workers N | --scheduler ADDRESS] [--reanalyse] [--only-report]
 
 A *point* is one channel run, (W, phi_bar, k_n, seed) at depth B and periodic height H,
-prepared by fill and release (:class:`granflow.scenes.channel.Channel`) and run in stints of
+prepared by fill and release (:class:`granflow.scenes.channel.Channel`, ``preparation =
+"pour"``: the soft pour the committed dataset was made with) and run in stints of
 ``stint`` time units. It stops when
 
 * it is **steady** and long enough (:func:`long_enough`), and only then are the SE targets
@@ -293,7 +294,7 @@ class ChannelStudy(Study):
         from granflow.scenes.channel import Channel
 
         return Channel(W=point.W, H=point.H, B=point.B, phi_bar=point.phi_bar, kn=point.kn,
-                       dt=point.dt, seed=point.seed, threads=threads,
+                       dt=point.dt, seed=point.seed, threads=threads, preparation="pour",
                        sample_every=max(1, round(SAMPLE_DT / point.dt)), window=WINDOW)
 
     def start(self, scene: Any, point: Point, plan: Plan, work: Path) -> None:

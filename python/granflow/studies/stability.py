@@ -372,7 +372,8 @@ def _scene(name: str) -> type[Scene]:
         raise SceneUnavailable(f"scene {name!r} not available: {exc}") from exc
 
 
-SMALL_CHANNEL: dict[str, Any] = {"W": 10.0, "H": 10.0, "B": 4.0}
+# the cases were recorded with the soft pour (it packs phi_bar = 0.58 at W = 10, H = 10, B = 4)
+SMALL_CHANNEL: dict[str, Any] = {"W": 10.0, "H": 10.0, "B": 4.0, "preparation": "pour"}
 
 
 def _channel(params: Mapping[str, Any], sim_time: float, n_samples: int = 50) -> Outcome:
