@@ -234,7 +234,7 @@ def test_channel_order_profile():
     from granflow.scenes.channel import Channel
 
     c = Channel(W=8, H=8, B=4, phi_bar=0.6, kn=1e5, dt=3e-4, seed=4, sample_every=None,
-                threads=1)
+                preparation="pour", threads=1)
     with pytest.raises(ConfigurationError):
         c.order_profile()
     c.prepare(progress=False)
