@@ -201,18 +201,21 @@ def test_no_se_from_fewer_than_ten_blocks():
 # --------------------------------------------------------------------------------------------
 # the 002 report's comparisons
 # --------------------------------------------------------------------------------------------
-def _paper_pool(shift: float, p_ext: float = 1e-4,
-                lo: float = 0.01) -> pl.DataFrame:
-    """Replica means at mu_s = 0.3 on 002's curves (mu1 shifted by ``shift``), SE 0.002,
-    at ``p_ext``, I from ``lo`` to 0.4."""
+def _paper_pool(shift: float, p_ext: float = 1e-4, lo: float = 0.01,
+                noise: np.random.Generator | None = None) -> pl.DataFrame:
+    """Replica means at mu_s = 0.3 on 002's curves (mu1 shifted by ``shift``), SE 0.002
+    (0.0005 for phi), at ``p_ext``, I from ``lo`` to 0.4; scattered by their SEs with
+    ``noise``."""
     inum = np.geomspace(lo, 0.4, 8)
     row: dict[str, object] = {"mu_s": 0.3, "N": 2000, "p_ext": p_ext,
                               "tau_ratio": np.linspace(0.4, 0.6, 8), "I": inum,
                               "I_se": 1e-4 * inum}
     for law in ("mu1", "mu2", "mu3", "phi"):
         y = rh.reference_curve(law, inum, 0.3, offset=0.01 if law == "mu3" else None)
-        row[law] = y + (shift if law == "mu1" else 0.0)
-        row[f"{law}_se"] = np.full(8, 0.002 if law != "phi" else 0.0005)
+        se = 0.002 if law != "phi" else 0.0005
+        row[law] = (y + (shift if law == "mu1" else 0.0)
+                    + (noise.normal(0.0, se, 8) if noise is not None else 0.0))
+        row[f"{law}_se"] = np.full(8, se)
     return pl.DataFrame(row)
 
 
@@ -238,20 +241,24 @@ def test_the_curve_comparison_and_the_printed_precision():
 def test_the_laws_are_fitted_over_every_pressure_and_the_collapse_is_tested():
     from granflow.studies import reproduce_002_report as rep
 
-    one = _paper_pool(0.0)
+    rng = np.random.default_rng(3)
+    one = _paper_pool(0.0, noise=rng)
     assert not rep.collapse(one, rep.fits_by_mu(one)).height  # one pressure: nothing to test
-    both = pl.concat([one, _paper_pool(0.0, p_ext=1e-5, lo=0.003)])
+    both = pl.concat([one, _paper_pool(0.0, p_ext=1e-5, lo=0.003, noise=rng)])
     fits = rep.fits_by_mu(both)
     assert fits[0.3]["mu1"].n == 16  # (both pressures in one fit, as 002)
     tab = rep.collapse(both, fits)
     assert set(tab["p_ext"].to_list()) == {1e-4, 1e-5}
     assert set(tab["law"].to_list()) == set(rep.COLLAPSE_LAWS)
     assert (tab["verdict"] == "collapses").all(), tab
-    # mu1 at the lower pressure 0.01 above the others' curve (5 SEs of a point): apart
-    apart = pl.concat([one, _paper_pool(0.01, p_ext=1e-5, lo=0.003)])
-    tab = rep.collapse(apart, rep.fits_by_mu(apart)).filter(pl.col("law") == "mu1")
-    assert all(v.startswith("apart") for v in tab["verdict"]), tab
-    z = dict(zip(tab["p_ext"].to_list(), tab["z"].to_list(), strict=True))
+    # mu1 at the lower pressure 0.01 above the others' curve (5 SEs of a point): apart, by
+    # the F test (the per-pressure mean residuals say so too here: same I range)
+    apart = pl.concat([one, _paper_pool(0.01, p_ext=1e-5, lo=0.003, noise=rng)])
+    tab = rep.collapse(apart, rep.fits_by_mu(apart))
+    mu1 = tab.filter(pl.col("law") == "mu1")
+    assert all(v.startswith("apart") for v in mu1["verdict"]), mu1
+    assert (tab.filter(pl.col("law") != "mu1")["verdict"] == "collapses").all(), tab
+    z = dict(zip(mu1["p_ext"].to_list(), mu1["z"].to_list(), strict=True))
     assert z[1e-5] > 2 and z[1e-4] < -2
     assert "## Pressure collapse" in rep.collapse_section(apart, rep.fits_by_mu(apart), 2000)[0]
 
