@@ -147,6 +147,12 @@ RAIN_CORE_BOTTOM = 2.0
 RAIN_CORE_TOP = 3.0
 
 
+def _floor_walls(width: float) -> list[Wall]:
+    """The preparation's walls: the side walls at x = 0 and ``width``, and the temporary floor
+    at y = 0."""
+    return [Wall(0, 0.0, 1.0), Wall(0, width, -1.0), Wall(1, 0.0, 1.0)]
+
+
 class _Stages:
     """The preparation's stages, one line each on stderr (when ``progress``, or None and
     stderr is a terminal) with the wall seconds since the start; a call returns them."""
@@ -401,39 +407,59 @@ class Channel(SceneParameters):
     def _pour(self, say: _Stages) -> _Pour:
         """Stage 1, pour: random insertion at PHI_INSERT in a tall box on a floor, poured
         under gravity (soft, frictionless) until the bed settles."""
-        vol_target = self.phi_bar * self.W * self.H * self.B
-        d = self.size_dist().diameters_for_volume(vol_target, self.seed)
-        vs = solid_volume(d)
-        h_fill = vs / (self.W * self.B * PHI_INSERT) + HEADROOM_DMAX * d.max()
-        x = np.asarray(_core.insert_spheres(
-            d, (0.0, 0.0, 0.0), (self.W, h_fill, self.B), (False, False, True), self.seed))
+        d, vs, h_fill, x = self._column(PHI_INSERT)
         soft = self._relax_material(min(self.mat.kn_value, self.prep_kn))
         prep_law = soft.law()
-        walls = [Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0), Wall(1, 0.0, 1.0)]
+        walls = _floor_walls(self.W)
         dt = soft.contact_time("lightest", d) / POUR_DT_DIVISOR
         box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
         sim = Simulation(x, d, box, prep_law, walls=walls, gravity=self.gravity, dt=dt,
                          threads=self.threads, density=self.mat.density, skin=self.mat.skin)
-        m = sim.core.masses()
         say(f"inserted {len(d)} spheres at phi = {PHI_INSERT} in a {self.W:g} x {h_fill:.4g} x "
             f"{self.B:g} box; pouring (kn = {prep_law.kn:g}, frictionless, dt = {dt:.3g})")
-        t_fall = float(np.sqrt(2 * h_fill))
+        ke = self._settle(sim, d, h_fill, "the bed")
+        return _Pour(d, sim.get_positions(), h_fill, vs, prep_law, dt, walls, float(sim.time),
+                     sim.step, ke)
+
+    def _column(self, phi: float) -> tuple[np.ndarray, float, float, np.ndarray]:
+        """The run's spheres (phi_bar's count) at random at volume fraction ``phi`` in a W x h
+        x B column above the floor: diameters, solid volume, h, positions."""
+        vol_target = self.phi_bar * self.W * self.H * self.B
+        d = self.size_dist().diameters_for_volume(vol_target, self.seed)
+        vs = solid_volume(d)
+        h = vs / (self.W * self.B * phi) + HEADROOM_DMAX * d.max()
+        x = np.asarray(_core.insert_spheres(
+            d, (0.0, 0.0, 0.0), (self.W, h, self.B), (False, False, True), self.seed))
+        return d, vs, h, x
+
+    def _settle(self, sim: Simulation, d: np.ndarray, h: float, what: str,
+                top_tol: float | None = None) -> float:
+        """Run the falling column of height ``h`` until it is at rest: kinetic energy per
+        particle below ``settle_ke`` m g d after the fall time sqrt(2 h) and, with
+        ``top_tol``, its top (highest sphere's top) within ``top_tol`` d of the last check;
+        refused (naming settle_ke) past SETTLE_T_BASE + SETTLE_T_FALLS fall times. Returns the
+        kinetic energy per particle."""
+        m = sim.core.masses()
+        t_fall = float(np.sqrt(2 * h))
         t_max = SETTLE_T_BASE + SETTLE_T_FALLS * t_fall
-        check = max(int(SETTLE_CHECK_TIME / dt), 1)
-        ke = np.inf
+        check = max(int(SETTLE_CHECK_TIME / sim.timestep), 1)
+        ke, top_before = np.inf, np.inf
         while sim.time < t_max:
             sim.run(check, progress=False)
             ke = sim.energies()["kinetic_translational"] / len(d) / float(np.mean(m))
-            if ke < self.settle_ke and sim.time > t_fall:
-                break
-        else:
-            raise ParameterError(
-                f"invalid settle_ke = {self.settle_ke}: the bed did not settle within "
-                f"t = {t_max:.0f} sqrt(d/g) (kinetic energy per particle {ke:.2e} m g d); "
-                "allowed a larger value"
-            )
-        return _Pour(d, sim.get_positions(), h_fill, vs, prep_law, dt, walls, float(sim.time),
-                     sim.step, float(ke))
+            if top_tol is None:
+                if ke < self.settle_ke and sim.time > t_fall:
+                    return float(ke)
+                continue
+            top = float(np.max(sim.get_positions()[:, 1] + d / 2))
+            if ke < self.settle_ke and sim.time > t_fall and abs(top - top_before) < top_tol:
+                return float(ke)
+            top_before = top
+        raise ParameterError(
+            f"invalid settle_ke = {self.settle_ke}: {what} did not settle within "
+            f"t = {t_max:.0f} sqrt(d/g) (kinetic energy per particle {ke:.2e} m g d); "
+            "allowed a larger value"
+        )
 
     def _squeeze(self, p: _Pour, x: np.ndarray) -> np.ndarray:
         """Stage 2a, squeeze: a bed taller than H is compressed affinely into [0, H) and relaxed
@@ -499,44 +525,21 @@ class Channel(SceneParameters):
         under gravity with the run's laws (particles and walls, the floor a wall) and dt, until
         the bed is at rest: kinetic energy per particle below ``settle_ke`` m g d, after the
         fall time, and its top still within RAIN_TOP_TOL d of the last check."""
-        vol_target = self.phi_bar * self.W * self.H * self.B
-        d = self.size_dist().diameters_for_volume(vol_target, self.seed)
-        vs = solid_volume(d)
-        h_col = vs / (self.W * self.B * self.rain_phi) + HEADROOM_DMAX * d.max()
-        x = np.asarray(_core.insert_spheres(
-            d, (0.0, 0.0, 0.0), (self.W, h_col, self.B), (False, False, True), self.seed))
-        walls = [Wall(0, 0.0, 1.0), Wall(0, self.W, -1.0), Wall(1, 0.0, 1.0)]
+        d, vs, h_col, x = self._column(self.rain_phi)
+        walls = _floor_walls(self.W)
         dt = self.timestep
         assert dt is not None  # (validated)
         box = Box(length=(self.W, h_col, self.B), periodic=(False, False, True))
         sim = Simulation(x, d, box, self.law, walls=walls, wall_law=self.wall_law,
                          gravity=self.gravity, dt=dt, threads=self.threads,
                          density=self.mat.density, skin=self.mat.skin)
-        m = sim.core.masses()
-        r = d / 2
-        say(f"inserted {len(d)} spheres at phi = {self.rain_phi:g} in a {self.W:g} x {h_col:.4g} x "
+        say(f"inserted {len(d)} spheres at phi = {self.rain_phi:g} in a {self.W:g} x "
+            f"{h_col:.4g} x "
             f"{self.B:g} column; raining (the run's laws, kn = {self.law.kn:g}, "
             f"dt = {dt:.3g})")
-        t_fall = float(np.sqrt(2 * h_col))
-        t_max = SETTLE_T_BASE + SETTLE_T_FALLS * t_fall
-        check = max(int(SETTLE_CHECK_TIME / dt), 1)
-        ke, top_before = np.inf, np.inf
-        while sim.time < t_max:
-            sim.run(check, progress=False)
-            ke = sim.energies()["kinetic_translational"] / len(d) / float(np.mean(m))
-            top = float(np.max(sim.get_positions()[:, 1] + r))
-            if (ke < self.settle_ke and sim.time > t_fall
-                    and abs(top - top_before) < RAIN_TOP_TOL):
-                break
-            top_before = top
-        else:
-            raise ParameterError(
-                f"invalid settle_ke = {self.settle_ke}: the rained bed did not settle within "
-                f"t = {t_max:.0f} sqrt(d/g) (kinetic energy per particle {ke:.2e} m g d); "
-                "allowed a larger value"
-            )
+        ke = self._settle(sim, d, h_col, "the rained bed", top_tol=RAIN_TOP_TOL)
         return _Pour(d, sim.get_positions(), h_col, vs, self.law, dt, walls, float(sim.time),
-                     sim.step, float(ke))
+                     sim.step, ke)
 
     def _prepare_rain(self, say: _Stages) -> None:
         """000's fill and release: rain (:meth:`_rain`); refuse a bed taller than H; release
