@@ -243,24 +243,24 @@ def test_the_laws_are_fitted_over_every_pressure_and_the_collapse_is_tested():
 
     rng = np.random.default_rng(3)
     one = _paper_pool(0.0, noise=rng)
-    assert not rep.collapse(one, rep.fits_by_mu(one)).height  # one pressure: nothing to test
+    assert not rep.collapse(one).height  # one pressure: nothing to test
     both = pl.concat([one, _paper_pool(0.0, p_ext=1e-5, lo=0.003, noise=rng)])
     fits = rep.fits_by_mu(both)
     assert fits[0.3]["mu1"].n == 16  # (both pressures in one fit, as 002)
-    tab = rep.collapse(both, fits)
+    tab = rep.collapse(both)
     assert set(tab["p_ext"].to_list()) == {1e-4, 1e-5}
     assert set(tab["law"].to_list()) == set(rep.COLLAPSE_LAWS)
     assert (tab["verdict"] == "collapses").all(), tab
     # mu1 at the lower pressure 0.01 above the others' curve (5 SEs of a point): apart, by
     # the F test (the per-pressure mean residuals say so too here: same I range)
     apart = pl.concat([one, _paper_pool(0.01, p_ext=1e-5, lo=0.003, noise=rng)])
-    tab = rep.collapse(apart, rep.fits_by_mu(apart))
+    tab = rep.collapse(apart)
     mu1 = tab.filter(pl.col("law") == "mu1")
     assert all(v.startswith("apart") for v in mu1["verdict"]), mu1
     assert (tab.filter(pl.col("law") != "mu1")["verdict"] == "collapses").all(), tab
     z = dict(zip(mu1["p_ext"].to_list(), mu1["z"].to_list(), strict=True))
     assert z[1e-5] > 2 and z[1e-4] < -2
-    assert "## Pressure collapse" in rep.collapse_section(apart, rep.fits_by_mu(apart), 2000)[0]
+    assert "## Pressure collapse" in rep.collapse_section(apart, 2000)[0]
 
 
 def test_the_shared_slow_mode_is_in_the_se():

@@ -5,7 +5,8 @@ time, wall time per piece and the paper-scale recipe with its core-hours."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -107,6 +108,15 @@ def _listed(col: pl.Series) -> str:
     return " ".join(f"{v:g}" for v in sorted(set(col.to_list())))
 
 
+def _agreement(intro: str, table: pl.DataFrame, shown: pl.DataFrame,
+               fmt: Mapping[str, str]) -> list[str]:
+    """A comparison's report lines: ``intro``, how many rows of ``table`` agree (within 2
+    combined SEs), and ``shown`` as a markdown table."""
+    ok = int((table["verdict"] == "agrees").sum())
+    return [f"{intro} {ok} of {table.height} within 2 combined SEs:", "",
+            md_table(shown, fmt), ""]
+
+
 def protocol_checks(out: Path) -> list[str]:
     """The section on whether the offsets are this code's or the protocol's, from the tables
     beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE); empty when neither is there."""
@@ -116,37 +126,33 @@ def protocol_checks(out: Path) -> list[str]:
     lines = ["## This code, or the protocol?", ""]
     if lmp.exists():
         t = pl.read_parquet(lmp)
-        ok = int((t["verdict"] == "agrees").sum())
-        lines += [
+        lines += _agreement(
             "**granflow against LAMMPS** on one protocol, from the same states: the "
             "rate-controlled cell (granflow.scenes.RateCell, sigma_yy held at p_ext, x and z "
             "fixed; N = 2000, p_ext = 1e-4) handed at the switch to LAMMPS's `fix "
-            "deform/pressure` with `gran/hooke/history` (`python benchmarks/lammps_rate_cell.py "
-            f"--mu {_listed(t['mu_s'])} --I {_listed(t['I'])} --seeds 1 2 3 --steps 200000 "
-            "--strain 10 --every 100`); "
-            "mu = |sigma_xy|/sigma_yy, N1, N2 over p; replica means of the seeds, z = "
-            f"difference over the combined SE. {ok} of {t.height} within 2 combined SEs:", "",
-            md_table(t.select("mu_s", "I", "quantity",
-                              _pm_column("granflow", "granflow_se", "granflow"),
-                              _pm_column("lammps", "lammps_se", "LAMMPS"),
-                              "z", "verdict"), {"mu_s": "g", "I": "g", "z": "+.2f"}), ""]
+            "deform/pressure` with `gran/hooke/history` (benchmarks/lammps_rate_cell.py; "
+            "each I's run length in benchmarks/NOTES.md; `python "
+            f"benchmarks/lammps_rate_cell.py --mu {_listed(t['mu_s'])} --I {_listed(t['I'])} "
+            f"--seeds 1 2 3 --only-table --out {lmp.parent.as_posix()}` rebuilds the table from "
+            "the committed series); mu = |sigma_xy|/sigma_yy, N1, N2 over p; replica means of "
+            "the seeds, z = difference over the combined SE.", t,
+            t.select("mu_s", "I", "quantity", _pm_column("granflow", "granflow_se", "granflow"),
+                     _pm_column("lammps", "lammps_se", "LAMMPS"), "z", "verdict"),
+            {"mu_s": "g", "I": "g", "z": "+.2f"})
     if eq.exists():
         e = pl.read_parquet(eq)
-        ok = int((e["verdict"] == "agrees").sum())
-        lines += [
+        lines += _agreement(
             "**Stress against rate control** in granflow: this campaign's points against the "
             "rate-controlled cell with the pressure held, at each point's replica-mean I, the "
             "same seeds, 12,000 t_c each (`python benchmarks/rate_cell.py equivalence`); the SE "
-            "of a difference carries the stress point's SE of I through the local slope. "
-            f"{ok} of {e.height} within 2 combined SEs:", "",
-            md_table(e.select("mu_s", "tau_ratio", pl.col("I_stress").alias("I"), "quantity",
-                              _pm_column("stress", "stress_se", "stress-controlled"),
-                              _pm_column("rate", "rate_se", "rate-controlled"),
-                              "z", "verdict"),
-                     {"mu_s": "g", "tau_ratio": "g", "I": ".3f", "z": "+.2f"}), ""]
+            "of a difference carries the stress point's SE of I through the local slope.", e,
+            e.select("mu_s", "tau_ratio", pl.col("I_stress").alias("I"), "quantity",
+                     _pm_column("stress", "stress_se", "stress-controlled"),
+                     _pm_column("rate", "rate_se", "rate-controlled"), "z", "verdict"),
+            {"mu_s": "g", "tau_ratio": "g", "I": ".3f", "z": "+.2f"})
     lines += ["Where both agree, the offsets from 002's laws found above are neither this "
-              "code's nor the protocol's at those points (p_ext = 1e-4); what remains is 002's "
-              "set-up. 002's three pressures are not run yet.", ""]
+              "code's nor the protocol's at those points (p_ext = 1e-4; the checks were run "
+              "there only); what remains is 002's set-up.", ""]
     return lines
 
 
@@ -339,77 +345,76 @@ def offsets(pool: pl.DataFrame, n: int = 2000) -> pl.DataFrame:
         row: dict[str, Any] = {"mu_s": float(mu), "p_ext": float(p), "points": g.height}
         for col in ("mu1", "mu2", "phi"):
             try:
-                ref = rh.reference_curve(col, g["I"].to_numpy(), float(mu))
+                mean, err = _mean_residual(
+                    g, col, partial(rh.reference_curve, col, mu_s=float(mu)))
             except ValueError:
                 row = {}
                 break
-            # the SE of the difference: ours, and the curve's slope times the SE of I
-            eps = 1e-6 * g["I"].to_numpy()
-            slope = (rh.reference_curve(col, g["I"].to_numpy() + eps, float(mu)) - ref) / eps
-            se = np.sqrt(g[f"{col}_se"].to_numpy() ** 2 + (slope * g["I_se"].to_numpy()) ** 2)
-            w = 1.0 / se**2
-            d = g[col].to_numpy() - ref
-            row[f"{col} - paper"] = float(np.sum(w * d) / np.sum(w))
-            row[f"{col} - paper SE"] = float(1.0 / np.sqrt(np.sum(w)))
+            row[f"{col} - paper"], row[f"{col} - paper SE"] = mean, err
         if row:
             rows.append(row)
     return pl.DataFrame(rows).sort(["mu_s", "p_ext"]) if rows else pl.DataFrame()
+
+
+def _mean_residual(g: pl.DataFrame, col: str,
+                   curve: Callable[[np.ndarray], Any]) -> tuple[float, float]:
+    """The inverse-variance mean of ``col`` - ``curve(I)`` over the points of ``g`` and its SE:
+    each point's SE of ``col`` and its SE of I through the curve's slope (central to the
+    comparison of points with a law)."""
+    ii = g["I"].to_numpy()
+    eps = 1e-6 * ii
+    y = np.asarray(curve(ii))
+    slope = (np.asarray(curve(ii + eps)) - y) / eps
+    se = np.sqrt(g[f"{col}_se"].to_numpy() ** 2 + (slope * g["I_se"].to_numpy()) ** 2)
+    w = 1.0 / se**2
+    d = g[col].to_numpy() - y
+    return float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
 
 
 #: the laws whose pressure collapse is tested (002 draws panels (b) of figs. 3, 4, 6)
 COLLAPSE_LAWS = ("mu1", "mu2", "phi")
 
 
-def collapse(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
-             n: int = 2000) -> pl.DataFrame:
+def collapse(pool: pl.DataFrame, n: int = 2000) -> pl.DataFrame:
     """Does each mu_s collapse over pressure? Per mu_s and law (:data:`COLLAPSE_LAWS`) with
-    fitted points at two or more pressures: the nested-model F test of one law for all
-    pressures (:func:`fits_by_mu`) against one law per pressure (each pressure fitted alone;
-    a pressure with fewer than 4 points is left out of the test),
+    fitted points (:func:`main_set`) at two or more pressures of at least 4 points each: the
+    nested-model F test of one law for those pressures against one law per pressure,
     F = ((chi2_joint - chi2_apart) / (3 (k - 1))) / (chi2_apart / (n - 3 k)), its p value, and
-    per pressure the mean residual of its points from the joint law (inverse-variance, the SE
-    of I through the law's slope) with its z. 'collapses': p >= COLLAPSE_P; a mean residual
-    alone can cancel where the pressures cover different ranges of I, the F test cannot."""
+    per pressure the mean residual of its points from the joint law
+    (:func:`_mean_residual`) with its z. 'collapses': p >= COLLAPSE_P; a mean residual alone
+    can cancel where the pressures cover different ranges of I, the F test cannot."""
     from scipy.stats import f as f_dist
 
     rows = []
-    fitted = main_set(pool, n)
-    for (mu,), g in fitted.group_by(["mu_s"], maintain_order=True):
-        ps = [p for p in sorted(set(g["p_ext"].to_list()), reverse=True)
-              if g.filter((pl.col("p_ext") / p - 1).abs() < 1e-9).height >= 4]
-        if len(ps) < 2:
+    for (mu,), g in main_set(pool, n).group_by(["mu_s"], maintain_order=True):
+        parts = {p: h for (p,), h in g.group_by(["p_ext"]) if h.height >= 4}
+        if len(parts) < 2:
             continue
+        ps = sorted(parts, reverse=True)
+        joint = rh.fit_all(pl.concat([parts[p] for p in ps]), include_x_errors=True,
+                           states=None)
+        alone = {p: rh.fit_all(parts[p], include_x_errors=True, states=None) for p in ps}
+        k, npts = len(ps), sum(parts[p].height for p in ps)
+        extra, dof_apart = 3 * (k - 1), npts - 3 * k
         for law in COLLAPSE_LAWS:
-            joint = fits.get(float(mu), {}).get(law)
-            if joint is None or not joint.success:
+            one = joint.get(law)
+            sep = [alone[p].get(law) for p in ps]
+            if one is None or not one.success or any(a is None or not a.success for a in sep):
                 continue
-            parts = [g.filter((pl.col("p_ext") / p - 1).abs() < 1e-9) for p in ps]
-            both = pl.concat(parts)
-            one = rh.fit_all(both, include_x_errors=True, states=None).get(law)
-            alone = [rh.fit_all(h, include_x_errors=True, states=None).get(law) for h in parts]
-            if one is None or any(a is None or not a.success for a in alone):
-                continue
-            chi_apart = sum(a.chi2 for a in alone if a is not None)
-            k, npts = len(ps), both.height
-            dof_apart = npts - 3 * k
-            extra = 3 * (k - 1)
+            chi_apart = sum(a.chi2 for a in sep if a is not None)
             f_val = (((one.chi2 - chi_apart) / extra) / (chi_apart / dof_apart)
                      if dof_apart > 0 and chi_apart > 0 else math.nan)
             p_val = float(f_dist.sf(f_val, extra, dof_apart)) if math.isfinite(f_val) else math.nan
             verdict = ("-" if not math.isfinite(p_val) else "collapses" if p_val >= COLLAPSE_P
                        else f"apart (p = {p_val:.1g})")
-            for p, h in zip(ps, parts, strict=True):
-                ii = h["I"].to_numpy()
-                eps = 1e-6 * ii
-                slope = (np.asarray(one(ii + eps)) - np.asarray(one(ii))) / eps
-                se = np.sqrt(h[f"{law}_se"].to_numpy() ** 2 + (slope * h["I_se"].to_numpy()) ** 2)
-                d = h[law].to_numpy() - np.asarray(one(ii))
-                w = 1.0 / se**2
-                mean, err = float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+            for p in ps:
+                h = parts[p]
+                mean, err = _mean_residual(h, law, one)
                 rows.append({"mu_s": float(mu), "law": law, "p_ext": float(p),
-                             "points": h.height, "I from": float(ii.min()),
-                             "I to": float(ii.max()), "ours - joint": mean, "SE": err,
-                             "z": mean / err, "chi2/dof joint": one.red_chi2,
+                             "points": h.height, "I from": float(h["I"].min()),  # type: ignore[arg-type]
+                             "I to": float(h["I"].max()),  # type: ignore[arg-type]
+                             "ours - joint": mean, "SE": err, "z": mean / err,
+                             "chi2/dof joint": one.red_chi2,
                              "chi2/dof apart": chi_apart / dof_apart if dof_apart > 0
                              else math.nan, "F": f_val, "p": p_val, "verdict": verdict})
     return pl.DataFrame(rows)
@@ -419,10 +424,9 @@ def collapse(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]
 COLLAPSE_P = 0.01
 
 
-def collapse_section(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
-                     n: int) -> list[str]:
+def collapse_section(pool: pl.DataFrame, n: int) -> list[str]:
     """The pressure collapse (:func:`collapse`) as report lines; none with one pressure."""
-    tab = collapse(pool, fits, n)
+    tab = collapse(pool, n)
     if not tab.height:
         return []
     tests = tab.unique(["mu_s", "law"], maintain_order=True)
@@ -713,7 +717,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              "its rows where marked), the other constants are given in §4 for mu_s = 0 and "
              "0.3 only. Constants are correlated within a law: read the curves above first.",
              "", _verdicts(rows), "", table1_markdown(rows), ""]
-    lines += collapse_section(pool, fits, n_main)
+    lines += collapse_section(pool, n_main)
     off = offsets(pool, n_main)
     if off.height:
         lines += ["## Against the paper's curves at our I", "",
