@@ -263,6 +263,28 @@ def test_the_laws_are_fitted_over_every_pressure_and_the_collapse_is_tested():
     assert "## Pressure collapse" in rep.collapse_section(apart, 2000)[0]
 
 
+def test_the_collapse_at_the_same_imposed_stress():
+    """The law-free test: the same tau/p at two pressures, I 6 % lower at the lower one is
+    apart (SE of I 0.01 %), mu1 on the same curve collapses; one pressure: nothing to test."""
+    from granflow.studies import reproduce_002_report as rep
+
+    rng = np.random.default_rng(5)
+    one = _paper_pool(0.0, noise=rng)
+    assert not rep.matched_stress(one)[0].height
+    same = pl.concat([one, _paper_pool(0.0, p_ext=1e-5, noise=rng)])
+    pairs, tests = rep.matched_stress(same)
+    assert pairs.height == 8 and set(pairs["p_ext"].to_list()) == {1e-5}
+    assert (tests["verdict"] == "collapses").all(), tests
+    slower = pl.concat([one, _paper_pool(0.0, p_ext=1e-5, noise=rng).with_columns(
+        pl.col("I") * 0.94)])
+    pairs, tests = rep.matched_stress(slower)
+    assert pairs["dI/I"].to_numpy() == pytest.approx(-0.06)
+    verdict = dict(zip(tests["quantity"].to_list(), tests["verdict"].to_list(), strict=True))
+    assert verdict["I"].startswith("apart") and verdict["mu1"] == "collapses", tests
+    text = "\n".join(rep.collapse_section(slower, 2000))
+    assert "At the same imposed stress" in text and "apart are I at mu_s = 0.3" in text
+
+
 def test_the_shared_slow_mode_is_in_the_se():
     """x = large fast noise + a slow mode that the reference carries almost alone (I and phi
     in the cell): x's own blocking SE misses the slow share, the shared-mode SE has it."""
