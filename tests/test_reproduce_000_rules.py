@@ -129,6 +129,33 @@ def test_no_stop_before_the_minimum_length():
     assert not rp.converged({**row, "u_slip_se": math.nan}, plan, p)  # too few blocks
 
 
+def test_the_widths_campaign_runs_the_widest_first_rained_and_to_t_1000():
+    plan = rp.widths_plan()
+    allp = [*plan.points, *plan.branches]
+    assert len({p.key for p in allp}) == len(allp)
+    assert all(p.prep == "rain" and p.H == rp.RAIN_H and p.key.endswith(f"_rain_s{p.seed}")
+               for p in allp)
+    # the widest first: a partial campaign still answers the width question
+    first = [p.W for p in plan.points[:6]]
+    assert set(first) == {150.0, 100.0} and plan.points[0].phi_bar == 0.60
+    seeds: dict[tuple[float, float, float], set[int]] = {}
+    for p in plan.points:
+        seeds.setdefault((p.W, p.phi_bar, p.B), set()).add(p.seed)
+    assert all(len(s) == 1 for (w, _, b), s in seeds.items() if w >= 100 or b != 10.0)
+    assert all(len(s) == rp.REPLICAS for (w, _, b), s in seeds.items() if w <= 60 and b == 10)
+    assert {(w, p) for (w, p, _) in seeds} >= {(w, p) for w in (20.0, 40.0, 60.0, 100.0, 150.0)
+                                              for p in (0.59, 0.60, 0.61)} | {(60.0, 0.62)}
+    assert {b for (w, p, b) in seeds if (w, p) == (60.0, 0.60)} == {10.0, 20.0, 40.0}
+    assert {(b.kn, b.seed) for b in plan.branches} == {(k, s) for k in rp.STIFF_KN
+                                                       for s in rp.SEEDS}
+    # no stop before t = 1000, however good the SEs
+    p = plan.points[0]
+    row = {"state": "steady", "drift_tested": True, "T_avg": 700.0, "tau_max": 10.0,
+           "u_slip": 10.0, "u_slip_se": 0.01, "u_max": 13.0, "u_max_se": 0.01, "t_end": 999.0}
+    assert not rp.converged(row, plan, p)
+    assert rp.converged({**row, "t_end": 1000.0}, plan, p)
+
+
 @pytest.mark.parametrize("make", [rp.full_plan, rp.paper_plan])
 def test_every_point_has_three_seeds(make):
     plan = make()

@@ -14,7 +14,7 @@ take N from phi_bar (whole particles: N <V_p> = phi_bar W B H to the nearest par
 ``preparation = "rain"`` (the default; 000's protocol):
 
 * rain (``_rain``): the N spheres are placed at random (``_core.insert_spheres``) in a dilute
-  column at volume fraction ``rain_phi`` (default 0.05) over the whole W x B section, from the
+  column at volume fraction ``rain_phi`` (default 0.02) over the whole W x B section, from the
   floor (a wall at y = 0) up to h_col = V_s/(W B rain_phi) + 2 d_max, and released at once
   under gravity with the run's own laws: the particles' (kn, k_t, e_n, friction, damping, form)
   and the particle-wall law (``wall_*``) on the side walls and on the floor, at the run's dt.
@@ -24,22 +24,39 @@ take N from phi_bar (whole particles: N <V_p> = phi_bar W B H to the nearest par
   flux ~ rain_phi sqrt(2 g h), lowest spheres first. ``rain_phi`` sets how the rain packs (a
   more dilute column arrives at a lower rate and a higher speed, and packs denser; docs/channel.md,
   "Preparation") and what it costs (the fall time sqrt(2 h_col) ~ rain_phi^-1/2);
+  Two ways to a cheaper rain, both off by default (docs/channel.md, "Preparation", measures
+  what they change): ``rain_kn`` rains softer (fewer steps; bounded below so that the fastest
+  impacts overlap by at most ``RAIN_MAX_IMPACT`` d) and stiffens the settled bed to the run's
+  laws on the floor before the release; ``rain_tiles`` rains one z-slab of depth B/rain_tiles
+  and repeats it along z. The rain's neighbour lists use a skin of at least ``RAIN_SKIN``
+  (a falling column rebuilds them often; the physics is the same);
 * settle: checked every ``SETTLE_CHECK_TIME``; the bed is at rest when the kinetic energy per
   particle is below ``settle_ke`` m g d after the fall time sqrt(2 h_col), and its top (the
   highest sphere's top) moved less than ``RAIN_TOP_TOL`` = 0.01 d since the last check
   (giving up, as the pour, after ``SETTLE_T_BASE`` + ``SETTLE_T_FALLS`` t_fall);
-* refusal: the bed fills H - Delta H with Delta H = H - (its top). A bed taller than H (phi_bar
-  above what the rain packs in this channel) is refused by ``prepare``, before the run's
-  simulation exists: a ParameterError naming phi_bar and the largest phi_bar that fits, the
-  bed's own fraction up to its top, V_s/(W B top), rounded down to 3 decimals (an estimate:
-  rains of other seeds or counts differ by ~0.01);
+* level and refusal: the bed fills H - Delta H up to its *level* (``_bed_level``: the height
+  at which its spheres above the core's bottom would end at the core's fraction, a flat top
+  of the same solid; the core is the slab of centres ``RAIN_CORE_BOTTOM`` d_max above the
+  floor to ``RAIN_CORE_TOP`` d_max below the top), Delta H = H - level. A level above H
+  (phi_bar above what the rain packs in this channel) is refused by ``prepare``, before the
+  run's simulation exists: a ParameterError naming phi_bar and the largest phi_bar that fits,
+  phi_bar H/level rounded down to 3 decimals (an estimate: rains of other seeds differ by
+  ~0.005);
+* seam (``_close_seam``): the rough top stands ~1 d above the level (000's "H - Delta H" of a
+  rough bed is its level). Where its highest spheres rise above H they cross the seam at the
+  release, onto the bed's flat bottom layer; there they are shrunk until no pair overlaps by
+  more than ``SEAM_START_OVERLAP`` of its mean diameter (with the spheres they would overlap),
+  then grown back in steps of ``SEAM_GROWTH``, each relaxed frictionless at the run's kn
+  without gravity (as the pour's squeeze) until no overlap exceeds ``PREP_MAX_OVERLAP``. Only
+  the seam's spheres move (``prep_info["seam_shift"]``, the largest displacement: ~0.7 d);
+  without it a bed could hold no phi_bar above its fraction up to the highest sphere (~0.575
+  at W = 20, H = 20 against a core of ~0.613: docs/channel.md, "Preparation");
 * release (``_release``): the floor goes, y becomes periodic with period H (Delta H stays empty
-  above the bed's top), the velocities start at zero (the bed was at rest, below
-  ``settle_ke``) and the tangential histories at zero; law and dt are the rain's.
-  ``prep_info`` records the bed's top, Delta H, the bed's fraction up to its top
-  (``phi_bed``) and in its core (``phi_bed_core``: centres between 2 d_max above the floor and
-  3 d_max below the top, away from the floor's layering and the rough top; None in a bed
-  too short to have one).
+  above the bed's level), the velocities start at zero (the bed was at rest, below
+  ``settle_ke``) and the tangential histories at zero; law and dt are the run's.
+  ``prep_info`` records the bed's top and level, Delta H, the bed's fraction up to its top
+  (``phi_bed``) and in its core (``phi_bed_core``), the spheres across the seam and their
+  largest shift.
 
 ``preparation = "pour"`` (the former default, kept bit for bit: the committed 000 campaign and
 the benchmarks that record a channel were prepared with it):
@@ -80,7 +97,7 @@ import os
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -141,10 +158,37 @@ PREPARATIONS = ("rain", "pour")
 RAIN_TOP_TOL = 0.01
 #: the densest column ``rain_phi`` allows (denser, the column lands as a slab, not as rain)
 RAIN_PHI_MAX = 0.3
+#: the rain's neighbour-list skin, at least: a falling column rebuilds its lists every
+#: skin/(2 v dt) steps, and a dilute one holds few extra pairs in a wide skin
+RAIN_SKIN = 1.0
+#: the deepest impact overlap (d) a soft rain (``rain_kn``) may allow: at W = 20, H = 40, B = 10,
+#: rain_phi = 0.05 (impacts up to 28 sqrt(g d)) kn = 1e5 (0.05 d) packs the bed's core at
+#: 0.6133 +- 0.0005 (3 seeds), rain_kn = 1e4 (0.17 d) at 0.6121 +- 0.0004, and rain_phi =
+#: 0.02 at rain_kn = 1e4 (0.25 d) went unstable; kn = 1e6 and 1e5 agree (docs/channel.md)
+RAIN_MAX_IMPACT = 0.05
+#: a rained bed whose rough top crosses the seam: those spheres start shrunk so that no pair
+#: overlaps by more than SEAM_START_OVERLAP of its mean diameter (below the kernel's 0.25),
+#: at least SEAM_MIN_SCALE of their size, and grow back by SEAM_GROWTH of it per stage
+SEAM_START_OVERLAP = 0.2
+SEAM_MIN_SCALE = 0.05
+SEAM_GROWTH = 0.1
+#: the thinnest slab ``rain_tiles`` may rain (thinner, the copies would repeat within a few
+#: particles)
+RAIN_TILE_MIN = 8.0
+#: a soft rain's stiffened bed is checked for rest every STIFFEN_CHECK_TIME sqrt(d/g)
+STIFFEN_CHECK_TIME = 0.1
 #: the bed's core, for ``prep_info["phi_bed_core"]``: the particles with centres between
 #: RAIN_CORE_BOTTOM d_max above the floor and RAIN_CORE_TOP d_max below the bed's top
 RAIN_CORE_BOTTOM = 2.0
 RAIN_CORE_TOP = 3.0
+
+
+def _min_image(dx: np.ndarray, h: float, depth: float) -> np.ndarray:
+    """Displacements with y (period ``h``) and z (period ``depth``) to the nearest image."""
+    out = np.array(dx, dtype=float, copy=True)
+    out[..., 1] -= h * np.round(out[..., 1] / h)
+    out[..., 2] -= depth * np.round(out[..., 2] / depth)
+    return out
 
 
 def _floor_walls(width: float) -> list[Wall]:
@@ -224,8 +268,18 @@ class Channel(SceneParameters):
             docstring).
         rain_phi: The volume fraction of the dilute random column the rain falls from
             (``preparation = "rain"``): a more dilute rain falls from higher, arrives at a lower
-            rate and a higher speed, and packs denser (docs/channel.md, "Preparation"), at the
-            cost of a longer fall.
+            rate and a higher speed, and packs denser (docs/channel.md, "Preparation": the
+            core at 0.622 at 0.02, 0.613 at 0.05), at the cost of a longer fall; 0.02 reaches
+            phi_bar = 0.61 at W = 20, H = 20.
+        rain_kn: The rain's stiffness (``preparation = "rain"``): None rains with the run's
+            kn; a lower value rains softer (particles and walls scaled alike, the rest of the
+            laws the run's, dt the material's rule at rain_kn: sqrt(kn/rain_kn) times fewer
+            steps), then stiffens the settled bed to the run's laws on the floor and settles
+            it again before the release (docs/channel.md, "Preparation", for what it changes).
+        rain_tiles: Rain one slab of depth B/rain_tiles and repeat it rain_tiles times along z
+            (periodic there, so the copies join without a seam): rain_tiles times fewer
+            spheres to rain; the bed is the slab's, periodic in z with period B/rain_tiles until
+            the flow decorrelates the copies; phi_bar is reached to rain_tiles particles.
     """
 
     W: float = 20.0
@@ -242,7 +296,9 @@ class Channel(SceneParameters):
     settle_ke: float = 1e-4
     prep_kn: float = 1e4
     preparation: str = "rain"
-    rain_phi: float = 0.05
+    rain_phi: float = 0.02
+    rain_kn: float | None = None
+    rain_tiles: int = 1
 
     scene_name: ClassVar[str]
     default_material: ClassVar[Material] = MATERIAL_000
@@ -287,6 +343,24 @@ class Channel(SceneParameters):
              " or ".join(repr(p) for p in PREPARATIONS) + " (000's rain, or the soft pour)")
         need(real(self.rain_phi) and 0 < self.rain_phi <= RAIN_PHI_MAX, "rain_phi",
              self.rain_phi, f"0 < rain_phi <= {RAIN_PHI_MAX} (a dilute column)")
+        need(isinstance(self.rain_tiles, (int, np.integer)) and not isinstance(
+            self.rain_tiles, bool) and self.rain_tiles >= 1
+             and (self.rain_tiles == 1 or self.B / self.rain_tiles >= RAIN_TILE_MIN),
+             "rain_tiles", self.rain_tiles, f"an integer >= 1, B/rain_tiles >= "
+             f"{RAIN_TILE_MIN:g} d where > 1 (B = {self.B:g})")
+        need(self.rain_kn is None or (real(self.rain_kn) and 0 < self.rain_kn <= mat.kn_value),
+             "rain_kn", self.rain_kn,
+             f"0 < rain_kn <= kn = {mat.kn_value:g}, or None for the run's kn")
+        if self.rain_kn is not None and real(self.phi_bar) and real(self.H):
+            # the last spheres land at v = sqrt(2 g h_col) and overlap the bed by up to
+            # v sqrt(m_eff/kn) (the heaviest pair, undamped): a soft rain may not press them
+            # in deeper than RAIN_MAX_IMPACT d, or than the run's own law does
+            v = float(np.sqrt(2 * (self.phi_bar * self.H / self.rain_phi + HEADROOM_DMAX * dmax)))
+            m_eff = 0.5 * mat.density * np.pi / 6 * dmax**3
+            kn_min = min(mat.kn_value, m_eff * (v / RAIN_MAX_IMPACT) ** 2)
+            need(self.rain_kn >= kn_min, "rain_kn", self.rain_kn,
+                 f"rain_kn >= {kn_min:.3g} (the rain lands at up to {v:.3g} sqrt(g d); "
+                 f"softer, its impacts would overlap by more than {RAIN_MAX_IMPACT:g} d)")
         # a wall value left at None is the particle value; 0 is not "unset"
         need(self.wall_kn is None or (real(self.wall_kn) and self.wall_kn > 0), "wall_kn",
              self.wall_kn, "a finite number > 0, or None for kn")
@@ -421,28 +495,31 @@ class Channel(SceneParameters):
         return _Pour(d, sim.get_positions(), h_fill, vs, prep_law, dt, walls, float(sim.time),
                      sim.step, ke)
 
-    def _column(self, phi: float) -> tuple[np.ndarray, float, float, np.ndarray]:
-        """The run's spheres (phi_bar's count) at random at volume fraction ``phi`` in a W x h
-        x B column above the floor: diameters, solid volume, h, positions."""
-        vol_target = self.phi_bar * self.W * self.H * self.B
+    def _column(self, phi: float, depth: float | None = None
+                ) -> tuple[np.ndarray, float, float, np.ndarray]:
+        """The run's spheres (phi_bar's count; in a slab of ``depth`` < B, the slab's) at
+        random at volume fraction ``phi`` in a W x h x depth column above the floor:
+        diameters, solid volume, h, positions."""
+        depth = self.B if depth is None else depth
+        vol_target = self.phi_bar * self.W * self.H * depth
         d = self.size_dist().diameters_for_volume(vol_target, self.seed)
         vs = solid_volume(d)
-        h = vs / (self.W * self.B * phi) + HEADROOM_DMAX * d.max()
+        h = vs / (self.W * depth * phi) + HEADROOM_DMAX * d.max()
         x = np.asarray(_core.insert_spheres(
-            d, (0.0, 0.0, 0.0), (self.W, h, self.B), (False, False, True), self.seed))
+            d, (0.0, 0.0, 0.0), (self.W, h, depth), (False, False, True), self.seed))
         return d, vs, h, x
 
     def _settle(self, sim: Simulation, d: np.ndarray, h: float, what: str,
-                top_tol: float | None = None) -> float:
+                top_tol: float | None = None, check_time: float = SETTLE_CHECK_TIME) -> float:
         """Run the falling column of height ``h`` until it is at rest: kinetic energy per
         particle below ``settle_ke`` m g d after the fall time sqrt(2 h) and, with
-        ``top_tol``, its top (highest sphere's top) within ``top_tol`` d of the last check;
-        refused (naming settle_ke) past SETTLE_T_BASE + SETTLE_T_FALLS fall times. Returns the
-        kinetic energy per particle."""
+        ``top_tol``, its top (highest sphere's top) within ``top_tol`` d of the last check
+        (checks every ``check_time``); refused (naming settle_ke) past SETTLE_T_BASE +
+        SETTLE_T_FALLS fall times. Returns the kinetic energy per particle."""
         m = sim.core.masses()
         t_fall = float(np.sqrt(2 * h))
         t_max = SETTLE_T_BASE + SETTLE_T_FALLS * t_fall
-        check = max(int(SETTLE_CHECK_TIME / sim.timestep), 1)
+        check = max(int(check_time / sim.timestep), 1)
         ke, top_before = np.inf, np.inf
         while sim.time < t_max:
             sim.run(check, progress=False)
@@ -468,16 +545,8 @@ class Channel(SceneParameters):
         top = float(np.max(x[:, 1] + r))
         ymax = self.H - SQUEEZE_TOP_MARGIN * d.max()
         x[:, 1] = r + (x[:, 1] - r) * (ymax - r.max()) / (np.max(x[:, 1]) - r.max())
-        box = Box(length=(self.W, self.H, self.B), periodic=(False, True, True))
-        rel = Simulation(x, d, box, p.law, walls=p.walls[:2], dt=p.dt, threads=self.threads,
-                         density=self.mat.density, skin=self.mat.skin)
-        for _ in range(SQUEEZE_ROUNDS):
-            rel.run(SQUEEZE_ROUND_STEPS, progress=False)
-            rel.set_velocities(np.zeros_like(x))
-            overlap = rel.diagnostics()["max_overlap"]
-            if overlap < PREP_MAX_OVERLAP:
-                break
-        else:
+        relaxed, overlap = self._relax_in_h(x, d, p.law, p.walls[:2], p.dt)
+        if overlap >= PREP_MAX_OVERLAP:
             # jammed: the bed cannot hold phi_bar in this channel without overlaps that
             # a run would carry as a stiffness-set pressure (kn x overlap)
             raise ParameterError(
@@ -486,7 +555,24 @@ class Channel(SceneParameters):
                 f"overlaps by {overlap:.3f} d >= {PREP_MAX_OVERLAP} d after relaxation; "
                 f"the pour reached {p.vs / (self.W * self.B * top):.3f} up to its top): a "
                 "lower phi_bar, or a wider channel")
-        return rel.get_positions()
+        return relaxed
+
+    def _relax_in_h(self, x: np.ndarray, d: np.ndarray, law: ContactLaw, walls: list[Wall],
+                    dt: float) -> tuple[np.ndarray, float]:
+        """Relax a bed in the run's box (periodic in y with period H), without gravity, in at
+        most SQUEEZE_ROUNDS rounds of SQUEEZE_ROUND_STEPS steps, each ending at rest, until
+        its largest overlap is below PREP_MAX_OVERLAP: the positions and that overlap."""
+        box = Box(length=(self.W, self.H, self.B), periodic=(False, True, True))
+        rel = Simulation(x, d, box, law, walls=walls, dt=dt, threads=self.threads,
+                         density=self.mat.density, skin=self.mat.skin)
+        overlap = float("inf")
+        for _ in range(SQUEEZE_ROUNDS):
+            rel.run(SQUEEZE_ROUND_STEPS, progress=False)
+            rel.set_velocities(np.zeros_like(x))
+            overlap = rel.diagnostics()["max_overlap"]
+            if overlap < PREP_MAX_OVERLAP:
+                break
+        return rel.get_positions(), overlap
 
     def _relax(self, p: _Pour, x: np.ndarray) -> np.ndarray:
         """Stage 2b, relax: the soft pour leaves overlaps ~ load/prep_kn; relax them at the
@@ -520,70 +606,202 @@ class Channel(SceneParameters):
         else:
             self._prepare_pour(say)
 
-    def _rain(self, say: _Stages) -> _Pour:
-        """Rain, stage 1: a dilute random column (``rain_phi``) above a floor, released at once
-        under gravity with the run's laws (particles and walls, the floor a wall) and dt, until
-        the bed is at rest: kinetic energy per particle below ``settle_ke`` m g d, after the
-        fall time, and its top still within RAIN_TOP_TOL d of the last check."""
-        d, vs, h_col, x = self._column(self.rain_phi)
-        walls = _floor_walls(self.W)
+    @property
+    def _soft_rain(self) -> bool:
+        """Whether the rain is softer than the run (``rain_kn`` below kn)."""
+        return self.rain_kn is not None and self.rain_kn < self.mat.kn_value
+
+    def _rain_laws(self) -> tuple[ContactLaw, ContactLaw, float]:
+        """The rain's particle law, wall law and dt: the run's, or with ``rain_kn`` softer
+        (both stiffnesses scaled by rain_kn/kn, dt the rule's at rain_kn)."""
         dt = self.timestep
         assert dt is not None  # (validated)
-        box = Box(length=(self.W, h_col, self.B), periodic=(False, False, True))
-        sim = Simulation(x, d, box, self.law, walls=walls, wall_law=self.wall_law,
+        if not self._soft_rain:
+            return self.law, self.wall_law, dt
+        assert self.rain_kn is not None
+        scale = self.rain_kn / self.mat.kn_value
+
+        def softer(law: ContactLaw) -> ContactLaw:
+            # the same restitution: a rate damping scales as sqrt(k m)
+            return replace(law, kn=law.kn * scale if law.kn else None,
+                           kt=law.kt * scale if law.kt else None,
+                           xi_n=law.xi_n * np.sqrt(scale) if law.xi_n else None)
+
+        return softer(self.law), softer(self.wall_law), dt / float(np.sqrt(scale))
+
+    def _rain(self, say: _Stages) -> _Pour:
+        """Rain, stage 1: a dilute random column (``rain_phi``) above a floor, released at once
+        under gravity with the run's laws (particles and walls, the floor a wall) and dt, or
+        softer (``rain_kn``, :meth:`_rain_laws`), until the bed is at rest: kinetic energy per
+        particle below ``settle_ke`` m g d, after the fall time, and its top still within
+        RAIN_TOP_TOL d of the last check. A soft rain's bed is then stiffened: the run's laws
+        and dt on the same floor, from rest, settled by the same test."""
+        tiles = self.rain_tiles
+        depth = self.B / tiles
+        d, vs, h_col, x = self._column(self.rain_phi, depth)
+        walls = _floor_walls(self.W)
+        law, wall_law, dt = self._rain_laws()
+        box = Box(length=(self.W, h_col, depth), periodic=(False, False, True))
+        # (the wider skin where the slab's period holds it: >= 2 (d_max + skin))
+        skin = max(self.mat.skin or kernel_default_skin(),
+                   min(RAIN_SKIN, 0.5 * depth - float(d.max()) - 1e-9))
+        sim = Simulation(x, d, box, law, walls=walls, wall_law=wall_law,
                          gravity=self.gravity, dt=dt, threads=self.threads,
-                         density=self.mat.density, skin=self.mat.skin)
+                         density=self.mat.density, skin=skin)
         say(f"inserted {len(d)} spheres at phi = {self.rain_phi:g} in a {self.W:g} x "
-            f"{h_col:.4g} x "
-            f"{self.B:g} column; raining (the run's laws, kn = {self.law.kn:g}, "
-            f"dt = {dt:.3g})")
+            f"{h_col:.4g} x {depth:g} column"
+            f"{f' (1 of {tiles} slabs along z)' if tiles > 1 else ''}; raining (kn = {law.kn:g}"
+            f"{' softer than the run' if self._soft_rain else ''}, dt = {dt:.3g})")
         ke = self._settle(sim, d, h_col, "the rained bed", top_tol=RAIN_TOP_TOL)
-        return _Pour(d, sim.get_positions(), h_col, vs, self.law, dt, walls, float(sim.time),
-                     sim.step, ke)
+        t, steps, pos = float(sim.time), sim.step, sim.get_positions()
+        if self._soft_rain:
+            say(f"rained soft: at rest at t = {t:.1f} sqrt(d/g), {steps} steps; stiffening "
+                f"to kn = {self.law.kn:g}")
+            stiff = Simulation(pos, d, box, self.law, walls=walls, wall_law=self.wall_law,
+                               gravity=self.gravity, dt=self.timestep, threads=self.threads,
+                               density=self.mat.density, skin=skin)
+            # a bed at rest: no fall to wait for, only the soft overlaps (load/rain_kn) to
+            # spring back, within a few sound crossings (H/sqrt(kn) << 1): checked often
+            ke = self._settle(stiff, d, 0.0, "the stiffened bed", top_tol=RAIN_TOP_TOL,
+                              check_time=STIFFEN_CHECK_TIME)
+            t, steps, pos = t + float(stiff.time), steps + stiff.step, stiff.get_positions()
+        if tiles > 1:
+            # the slab repeated along z (periodic there: the copies join without a seam)
+            pos = np.concatenate([pos + np.array([0.0, 0.0, j * depth]) for j in range(tiles)])
+            d, vs = np.tile(d, tiles), vs * tiles
+        return _Pour(d, pos, h_col, vs, self.law, dt, walls, t, steps, ke)
 
     def _prepare_rain(self, say: _Stages) -> None:
-        """000's fill and release: rain (:meth:`_rain`); refuse a bed taller than H; release
-        (the floor goes, Delta H = H - bed top stays empty)."""
+        """000's fill and release: rain (:meth:`_rain`); a bed whose rough top rises above H
+        but whose level (:meth:`_bed_level`) does not has the spheres above H across the seam
+        relaxed into the bed's bottom; a bed whose level is above H is refused; release (the
+        floor goes, Delta H = H - level stays empty)."""
         p = self._rain(say)
         settled = say(f"settled: kinetic energy per particle {p.ke:.2e} < settle_ke = "
                       f"{self.settle_ke:g} m g d, bed top still, at t = {p.time:.1f} "
                       f"sqrt(d/g), {p.steps} steps")
         top = float(np.max(p.x[:, 1] + p.d / 2))
         area = self.W * self.B
-        phi_bed = p.vs / (area * top)
-        if top > self.H:
-            # a bed of this phi_bar's particles filling exactly H would hold phi_bed (a
-            # shorter bed packs a little looser up to its rough top: the rain's randomness,
-            # ~0.01 between seeds, is larger)
-            fits = np.floor(phi_bed * 1000) / 1000
+        level, phi_core = self._bed_level(p.x, p.d, top)
+        room = self.H
+        if level > room:
+            # the largest phi_bar whose spheres this rain packs to a level <= room (an estimate:
+            # the level scales with the solid volume; the rain's randomness, ~0.005 between
+            # seeds, is larger)
+            fits = np.floor(self.phi_bar * room / level * 1000) / 1000
             raise ParameterError(
                 f"invalid phi_bar = {self.phi_bar!r}: allowed phi_bar <= {fits:.3f}, the "
-                f"largest the rain packs in this channel (the settled bed reaches y = "
-                f"{top:.3f} > H = {self.H:g}, packing {phi_bed:.4f} up to its top): a lower "
-                "phi_bar, or preparation = 'pour' (squeezed into H)")
+                f"largest the rain packs in this channel (the settled bed's level is y = "
+                f"{level:.3f} > H = {room:g}; its core packs "
+                f"{phi_core:.4f}): a lower phi_bar, a taller H, or preparation = 'pour' "
+                "(squeezed into H)")
+        x, seam = p.x, 0
+        if top > self.H:
+            x, seam, overlap = self._close_seam(p, say)
+            if overlap >= PREP_MAX_OVERLAP:
+                raise ParameterError(
+                    f"invalid phi_bar = {self.phi_bar!r}: allowed a value whose rained bed "
+                    f"closes over its seam (its level {level:.3f} is below H = {self.H:g}, "
+                    f"but its {seam} spheres across the seam still overlap by {overlap:.3f} d "
+                    f">= {PREP_MAX_OVERLAP} d after relaxation): a lower phi_bar, or a "
+                    "taller H")
         phi_bar = p.vs / (area * self.H)
-        # the bed away from the floor's layering and the rough top (centres in the slab)
-        y, dmax = p.x[:, 1], float(p.d.max())
-        lo, hi = RAIN_CORE_BOTTOM * dmax, top - RAIN_CORE_TOP * dmax
-        core = (y >= lo) & (y < hi)
-        # (None: a bed too short to have a core)
-        phi_core = solid_volume(p.d[core]) / (area * (hi - lo)) if hi - lo >= dmax else None
-        done = say(f"released: {len(p.d)} spheres, phi_bar = {phi_bar:.4f}, bed top "
-                   f"{top:.4g} (Delta H = {self.H - top:.3g}, bed phi {phi_bed:.4f})")
-        self._release(p.x, p.d, {
+        shift = float(np.max(np.linalg.norm(
+            _min_image(x - p.x, self.H, self.B), axis=1))) if seam else 0.0
+        done = say(f"released: {len(p.d)} spheres, phi_bar = {phi_bar:.4f}, bed level "
+                   f"{level:.4g} (Delta H = {self.H - level:.3g}), top {top:.4g}"
+                   + (f" ({seam} spheres across the seam grown back into place; the "
+                      f"largest shift {shift:.3f} d)" if seam else ""))
+        self._release(x, p.d, {
             "preparation": "rain",
             "n": int(len(p.d)),
             "phi_bar_achieved": phi_bar,
             "bed_top": top,
-            "delta_H": self.H - top,
-            "phi_bed": phi_bed,
+            "bed_level": level,
+            "delta_H": self.H - level,
+            "phi_bed": p.vs / (area * top),
             "phi_bed_core": phi_core,
+            "seam_spheres": seam,
+            "seam_shift": shift,
             "rain_phi": self.rain_phi,
+            "rain_kn": self.law.kn if self.rain_kn is None else float(self.rain_kn),
+            "rain_tiles": int(self.rain_tiles),
             "settle_time": p.time,
             "settle_ke": p.ke,
             "rain_seconds": settled,
             "seconds": done,
         })
+
+    def _close_seam(self, p: _Pour, say: _Stages) -> tuple[np.ndarray, int, float]:
+        """A bed whose level is below H but whose rough top is not: at the release its
+        highest spheres cross the seam y = H = 0 onto the bed's bottom layer. They are grown
+        back into place there: shrunk until no pair overlaps by more than SEAM_START_OVERLAP
+        of its mean diameter, then grown in steps of SEAM_GROWTH of their radius, each
+        followed by the relaxation of :meth:`_relax_in_h` (the run's stiffness, frictionless,
+        no gravity, periodic in y with period H, at rest after each round). Returns the
+        positions, the number of spheres grown and the largest overlap left."""
+        from scipy.spatial import cKDTree
+
+        x, d = p.x.copy(), p.d
+        seam = np.flatnonzero(x[:, 1] + d / 2 > self.H)
+        x[:, 1] = np.mod(x[:, 1], self.H)
+        # the seam spheres' radii scaled down until no pair overlaps by more than
+        # SEAM_START_OVERLAP of its (scaled) mean diameter (x is not periodic: a box wide
+        # enough never wraps it)
+        tree = cKDTree(x, boxsize=[self.W + 4.0 * d.max(), self.H, self.B])
+        scale = np.ones(len(d))
+        pairs = np.array(sorted({(int(i), int(j)) for i in seam
+                                 for j in tree.query_ball_point(x[i], float(d.max()))
+                                 if j != i}), dtype=int).reshape(-1, 2)
+        dist = np.linalg.norm(_min_image(x[pairs[:, 1]] - x[pairs[:, 0]], self.H, self.B),
+                              axis=1)
+        for _ in range(50):
+            ri = d[pairs[:, 0]] / 2 * scale[pairs[:, 0]]
+            rj = d[pairs[:, 1]] / 2 * scale[pairs[:, 1]]
+            bad = (ri + rj - dist) > SEAM_START_OVERLAP * (ri + rj)
+            if not bad.any():
+                break
+            # both spheres of a bad pair shrink by f: (r_i + r_j) f (1 - a) <= dist
+            f = dist[bad] / ((1 - SEAM_START_OVERLAP) * (ri[bad] + rj[bad]))
+            f = np.clip(0.98 * f, SEAM_MIN_SCALE, 1.0)
+            np.minimum.at(scale, pairs[bad, 0], f * scale[pairs[bad, 0]])
+            np.minimum.at(scale, pairs[bad, 1], f * scale[pairs[bad, 1]])
+            scale = np.maximum(scale, SEAM_MIN_SCALE)
+        else:
+            raise ParameterError(
+                f"invalid phi_bar = {self.phi_bar!r}: allowed a value whose rained bed closes "
+                f"over its seam at H = {self.H:g} (a sphere across it sits on another): a "
+                "lower phi_bar, or a taller H")
+        grown = np.flatnonzero(scale < 1.0)
+        stages = int(np.ceil((1.0 - float(scale.min())) / SEAM_GROWTH)) + 1
+        say(f"closing the seam: {seam.size} spheres above H = {self.H:g} cross it; they and "
+            f"{grown.size - np.intersect1d(grown, seam).size} others they would overlap are "
+            f"grown back from {float(scale.min()):.2f} of their size in {stages} stages")
+        relax = self._relax_material(self.mat.kn_value)
+        overlap = float("inf")
+        s = scale[grown].copy()
+        for _ in range(stages):
+            dd = d.copy()
+            dd[grown] = d[grown] * s
+            # (the shrunk spheres are lighter: the step is their contact time's)
+            dt = relax.contact_time("lightest", dd) / POUR_DT_DIVISOR
+            x, overlap = self._relax_in_h(x, dd, relax.law(), _floor_walls(self.W)[:2], dt)
+            s = np.minimum(s + SEAM_GROWTH, 1.0)
+        return x, int(seam.size), overlap
+
+    def _bed_level(self, x: np.ndarray, d: np.ndarray, top: float) -> tuple[float, float]:
+        """The rained bed's level and its core's volume fraction: the core is the slab of
+        centres RAIN_CORE_BOTTOM d_max above the floor to RAIN_CORE_TOP d_max below the top
+        (away from the floor's layering and the rough top; in a bed too short for one, the
+        centres above the floor layer), the level the height at which the spheres above the
+        core's bottom would end at the core's fraction (a flat top of the same solid)."""
+        y, dmax, area = x[:, 1], float(d.max()), self.W * self.B
+        lo, hi = RAIN_CORE_BOTTOM * dmax, top - RAIN_CORE_TOP * dmax
+        if hi - lo < dmax:
+            lo, hi = 0.5 * dmax, top - 0.5 * dmax
+        core = (y >= lo) & (y < hi)
+        phi_core = solid_volume(d[core]) / (area * (hi - lo))
+        return lo + solid_volume(d[y >= lo]) / (area * phi_core), float(phi_core)
 
     def _prepare_pour(self, say: _Stages) -> None:
         """The soft pour (:meth:`_pour`), then squeeze or relax, then release."""

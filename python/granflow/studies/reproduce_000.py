@@ -91,11 +91,13 @@ class Point:
     B: float = 10.0
     H: float = 20.0
     parent: str = ""
+    #: the channel's preparation: "pour" (the committed full and paper plans) or 000's "rain"
+    prep: str = "pour"
 
     @property
     def key(self) -> str:
         return (f"W{self.W:g}_phi{self.phi_bar:g}_kn{self.kn:g}_B{self.B:g}_H{self.H:g}"
-                f"_s{self.seed}")
+                f"{'' if self.prep == 'pour' else '_' + self.prep}_s{self.seed}")
 
     @property
     def dt(self) -> float:
@@ -123,6 +125,8 @@ class Plan:
     t_max: float = 1500.0
     #: steady averaging time a point needs at least (000 averages 600)
     min_average: float = 200.0
+    #: run time a point needs at least before it may stop (000: 2000 of development)
+    t_min: float = 0.0
     #: integrated correlation times of the slowest of granflow.analysis.channel's
     #: STEADY_QUANTITIES the steady part must span before the SE targets are consulted (~10
     #: jackknife blocks of 2 tau)
@@ -136,6 +140,10 @@ class Plan:
         if point.parent:
             return self.branch_t_max, self.branch_min_average
         return self.t_max, self.min_average
+
+    def t_min_of(self, point: Point) -> float:
+        """The run time ``point`` needs at least (branches: none beyond their averaging)."""
+        return 0.0 if point.parent else self.t_min
 
 
 WIDTHS = (20.0, 40.0, 60.0)
@@ -158,6 +166,42 @@ def full_plan() -> Plan:
     branches = tuple(b for s in SEEDS for b in _branches(Point(*STIFF_AT, seed=s), STIFF_KN))
     return Plan("full", pts, branches,
                 later=tuple(Point(100.0, p, seed=s) for p in PHIS for s in SEEDS))
+
+
+#: issue 36's campaign (:func:`widths_plan`): 000's rain, widths to 150, the depth check and
+#: the stiffness branches at W = 60
+WIDE = (150.0, 100.0)
+NARROW = (60.0, 40.0, 20.0)
+RAIN_PHIS = (0.59, 0.60, 0.61)
+#: the jamming bound is looked for at W = 60 (000: phi_bar_max = 0.62)
+JAM_AT = (60.0, 0.62)
+#: the depth check at W = 60, phi_bar = 0.60 (000 runs B = 40)
+DEPTHS = (20.0, 40.0)
+DEPTH_AT = (60.0, 0.60)
+#: the periodic height of the rained campaign (issue 36): the rain (rain_phi = 0.02) packs its
+#: bed's core at ~0.622 and the seam closes over its rough top (docs/channel.md,
+#: "Preparation"), so H = 20 holds phi_bar = 0.59-0.61
+RAIN_H = 20.0
+
+
+def widths_plan() -> Plan:
+    """Issue 36's campaign, largest first (a partial campaign still answers the width
+    question): W = 150 and 100 at phi_bar = 0.59, 0.60, 0.61, one seed; W = 60, 40, 20 at the
+    same phi_bar (and 0.62 at W = 60: the jamming bound), REPLICAS seeds; the depth check at
+    W = 60, phi_bar = 0.60 (B = 20, 40; B = 10 is the main point); then the stiffness
+    branches (k_n = 1e6, 1e7 from the W = 60, phi_bar = 0.60 point of each seed). All at
+    H = RAIN_H, k_n = 1e5, prepared by 000's rain; each runs to t >= 1000 (000: 2000 + 600
+    where the budget allows: t_max = 2600) and on until steady and converged."""
+    def rained(w: float, phi: float, seed: int, b: float = 10.0) -> Point:
+        return Point(w, phi, seed=seed, B=b, H=RAIN_H, prep="rain")
+
+    wide = tuple(rained(w, p, 1) for p in (0.60, 0.59, 0.61) for w in WIDE)
+    narrow = tuple(rained(w, p, s) for w in NARROW for p in RAIN_PHIS for s in SEEDS)
+    jam = tuple(rained(*JAM_AT, s) for s in SEEDS)
+    depth = tuple(rained(*DEPTH_AT, 1, b) for b in DEPTHS)
+    branches = tuple(b for s in SEEDS for b in _branches(rained(*DEPTH_AT, s), STIFF_KN))
+    return Plan("widths", (*wide, *narrow, *jam, *depth), branches, t_min=1000.0,
+                t_max=2600.0)
 
 
 def paper_plan() -> Plan:
@@ -268,7 +312,8 @@ def long_enough(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
     tau = row.get("tau_max", math.nan)
     return (state in FlowState._value2member_map_ and FlowState(state).is_steady
             and bool(row.get("drift_tested")) and math.isfinite(tau)
-            and t_avg >= plan.limits(point)[1] and t_avg >= plan.min_taus * tau)
+            and t_avg >= plan.limits(point)[1] and t_avg >= plan.min_taus * tau
+            and row.get("t_end", 0.0) >= plan.t_min_of(point) - 1e-9)
 
 
 def converged(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
@@ -294,7 +339,7 @@ class ChannelStudy(Study):
         from granflow.scenes.channel import Channel
 
         return Channel(W=point.W, H=point.H, B=point.B, phi_bar=point.phi_bar, kn=point.kn,
-                       dt=point.dt, seed=point.seed, threads=threads, preparation="pour",
+                       dt=point.dt, seed=point.seed, threads=threads, preparation=point.prep,
                        sample_every=max(1, round(SAMPLE_DT / point.dt)), window=WINDOW)
 
     def start(self, scene: Any, point: Point, plan: Plan, work: Path) -> None:
@@ -375,6 +420,7 @@ def main(argv: Iterable[str] | None = None) -> None:
     cli(argv, module="granflow.studies.reproduce_000", description=(__doc__ or "").splitlines()[0],
         plans={"quick": (quick_plan, "minutes-long subset (default)"),
                "full": (full_plan, "the width and phi_bar campaign"),
+               "widths": (widths_plan, "issue 36: 000's rain, W to 150, t >= 1000"),
                "paper": (paper_plan, "000's own scale (a cluster's work: the report's "
                                      "recipe)")},
         reanalyse=reanalyse, run_campaign=run_campaign,
