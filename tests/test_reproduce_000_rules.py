@@ -218,3 +218,22 @@ def test_stiffness_zone_means_are_replica_means_with_both_ses():
     between = small_sample_factor(3) * 0.1 / math.sqrt(3)
     assert cell == (f"13.20 ± {between:.2f} (6) [within {0.05 / math.sqrt(3):.2g} / "
                     f"between {between:.2g}]")
+
+
+def test_the_fluctuation_threshold_scales_with_the_particle_count():
+    """000's 1 % (set for 1.7e5 particles) scaled as N^-1/2: a 3.9 % amplitude (W = 20,
+    4500 particles) is steady there, fluctuating against the bare 1 %."""
+    from granflow.analysis.channel_profiles import N_REF_000, flow_state
+    from granflow.errors import ParameterError
+
+    t = np.linspace(0.0, 400.0, 4001)
+    v = 5.0 * (1.0 + 0.039 * np.sin(2 * np.pi * t / 7.0))
+    series = {"t": t, "vcm_y": v}
+    assert flow_state(series).state.value == "fluctuating"
+    small = flow_state(series, n_particles=4500)
+    assert small.state.value == "steady"
+    assert small.thresholds["max_rel_amplitude"] == pytest.approx(
+        0.01 * np.sqrt(N_REF_000 / 4500))
+    assert flow_state(series, n_particles=int(N_REF_000)).state.value == "fluctuating"
+    with pytest.raises(ParameterError, match="invalid n_particles = 0"):
+        flow_state(series, n_particles=0)

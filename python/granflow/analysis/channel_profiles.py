@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 
+from granflow.errors import ParameterError
 from granflow.states import FlowState
 
 from ._numerics import quiet
@@ -67,6 +68,11 @@ _ANTISYMMETRIC = {"du_y_dx", "w_z", "sigma_xy"}
 # --------------------------------------------------------------------------------------------
 # flow state from the centre-of-mass velocity
 # --------------------------------------------------------------------------------------------
+#: 000's smallest channel (W = 60 d: 1.7e5 particles), for which its 1 % steadiness threshold
+#: on the centre-of-mass velocity's fluctuation was set (§2)
+N_REF_000 = 1.7e5
+
+
 @dataclass
 class ChannelState:
     """Classification of the centre-of-mass velocity series: ``state`` a
@@ -82,7 +88,10 @@ class ChannelState:
        state for a flow slowing down, e.g. on its way to arrest: not steady either.)
     3. ``fluctuating``: relative fluctuation amplitude ``(p95 - p5) / (2 v_mean)`` above
        ``max_rel_amplitude`` (paper 000 §3.1 / fig. 3: < 1 % variation is steady, 1-2 % at
-       phi_bar = 0.62 is fluctuating).
+       phi_bar = 0.62 is fluctuating). 000 set 1 % for 1.7-4.1e5 particles; the centre-of-mass
+       velocity of N particles fluctuates as N^-1/2, so given ``n_particles`` the threshold is
+       ``max_rel_amplitude sqrt(N_REF_000 / n_particles)`` (N_REF_000 = 1.7e5, 000's smallest
+       channel: 6.1 % at N = 4500, 1 % at 000's size).
     4. ``steady`` otherwise.
     """
 
@@ -116,6 +125,7 @@ def flow_state(
     accel_fraction: float = 0.01,
     max_rel_drift: float = 0.05,
     t_sig: float = 3.0,
+    n_particles: int | None = None,
 ) -> ChannelState:
     """Classify a channel run as steady, fluctuating, arrested, accelerating or decelerating
     (a :class:`granflow.states.FlowState`) from its centre-of-mass velocity (criteria in
@@ -131,7 +141,15 @@ def flow_state(
         Gravity and particle diameter (velocity scale ``sqrt(g d)``).
     v_arrest, max_rel_amplitude, accel_fraction, max_rel_drift, t_sig
         Thresholds (see :class:`ChannelState`).
+    n_particles
+        The channel's particle count: scales ``max_rel_amplitude`` as N^-1/2 from 000's
+        (:class:`ChannelState`); None keeps it as given.
     """
+    if n_particles is not None:
+        if not n_particles > 0:
+            raise ParameterError(f"invalid n_particles = {n_particles!r}: allowed an integer "
+                                 "> 0, or None")
+        max_rel_amplitude *= math.sqrt(N_REF_000 / n_particles)
     t = column(series, "t")
     v = np.abs(column(series, column_name))
     n = t.size

@@ -961,7 +961,7 @@ class Channel(SceneParameters):
         out: dict[str, Any] = {"n": self.prep_info.get("n"),
                                "phi_bar_achieved": self.prep_info.get("phi_bar_achieved")}
         if "series" in t:
-            fs = flow_state(t["series"])
+            fs = flow_state(t["series"], n_particles=self.prep_info.get("n"))
             out["state"] = FlowState(fs.state)
         if "bins" not in t or t["bins"].num_rows == 0:
             return out

@@ -252,10 +252,13 @@ def _se_rows(point: Point, bins: pa.Table, t_start: float, t_end: float) -> list
     return rows
 
 
-def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table) -> dict[str, Any]:
-    """The row of a point from its tables: state, steady start and averaging time, the
-    section 3 numbers with SEs, whether it met the plan's criterion; its half profile, zone
-    means and SE rows under ``"profile_rows"``, ``"zone_rows"``, ``"se_rows"``."""
+def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table,
+              n: int | None = None) -> dict[str, Any]:
+    """The row of a point from its tables: state (the fluctuation threshold scaled to its
+    ``n`` particles where given, :func:`~granflow.analysis.channel_profiles.flow_state`),
+    steady start and averaging time, the section 3 numbers with SEs, whether it met the
+    plan's criterion; its half profile, zone means and SE rows under ``"profile_rows"``,
+    ``"zone_rows"``, ``"se_rows"``."""
     from granflow.analysis import channel as ach
     from granflow.analysis.channel_profiles import flow_state, profiles
 
@@ -264,7 +267,7 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table) -> dic
     t = np.asarray(series.column("t").to_numpy(), dtype=float)
     if t.size < 100:
         return row
-    fs = flow_state(series)
+    fs = flow_state(series, n_particles=n)
     row.update(state=fs.state, t_end=float(t[-1]), vcm_tail=fs.v_mean,
                rel_amplitude=fs.rel_amplitude, rel_drift=fs.rel_drift)
     if not fs.is_steady:
@@ -348,6 +351,9 @@ class ChannelStudy(Study):
         else:
             scene.prepare(progress=False)
 
+    def context(self, scene: Any) -> dict[str, Any]:
+        return {"n": scene.prep_info.get("n")}
+
     def next_steps(self, scene: Any, point: Point, plan: Plan) -> int:
         t_max, _ = plan.limits(point)
         if scene.core.time >= t_max - 1e-9:
@@ -364,7 +370,10 @@ class ChannelStudy(Study):
 
     def row(self, point: Point, plan: Plan, tables: Mapping[str, pa.Table],
             context: Mapping[str, Any]) -> dict[str, Any]:
-        return point_row(point, plan, tables["bins"], tables["series"])
+        # (the rained campaign's state is judged with the N-scaled threshold; the committed
+        # pour campaign keeps 000's 1 %, as it was run)
+        n = context.get("n") if point.prep == "rain" else None
+        return point_row(point, plan, tables["bins"], tables["series"], n)
 
     def stop(self, row: Mapping[str, Any], point: Point, plan: Plan,
              history: Sequence[str]) -> str | None:
