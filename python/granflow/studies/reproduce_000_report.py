@@ -880,7 +880,34 @@ def _cost_section(points: pl.DataFrame, paper: Any) -> list[str]:
             f"about {est['core-hours']:,.0f} core-hours at the measured throughput "
             f"({est['core-hours'] / 64:,.0f} hours on 64 cores; fewer where a run "
             "arrests or meets its SE target early).", "",
+            *_per_point_cost(paper, rate),
             *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")]
+
+
+#: two threads against one on the flowing channel (benchmarks/NOTES.md: 3.15-3.35e7 against
+#: 1.77-1.83e7 particle-steps/s, 6754 particles): the only thread scaling measured here
+TWO_THREAD_SPEEDUP = 1.8
+
+
+def _per_point_cost(paper: Any, rate: float) -> list[str]:
+    """Core-hours of one paper-scale point per W (at phi_bar = 0.60, to the plan's t_max) and
+    the cores a node needs to finish one in a day (at linear scaling: measured here only to
+    two threads)."""
+    steps = _particle_steps(paper)
+    rows = []
+    for w in sorted({p.W for p in paper.points}):
+        p = next(q for q in paper.points if q.W == w and abs(q.phi_bar - 0.60) < 1e-9)
+        ch = steps(p) / rate / 3600
+        rows.append({"W": w, "particles": round(steps(p) / (paper.t_max / p.dt)),
+                     "particle-steps": steps(p), "core-hours": ch, "cores for a day": ch / 24})
+    tab = pl.DataFrame(rows)
+    return ["One point of it (phi_bar = 0.60, B = 40, H = 60, k_n = 1e6, dt = 1.2e-4, to "
+            f"t = {paper.t_max:g}), and the cores a node needs to run it in a day at linear "
+            "scaling (measured here only from one thread to two, "
+            f"x{TWO_THREAD_SPEEDUP:g} on the flowing channel: benchmarks/NOTES.md; the 16-core "
+            "scaling is not measured):", "",
+            md_table(tab, {"W": ".0f", "particles": ".0f", "particle-steps": ".3g",
+                           "core-hours": ",.0f", "cores for a day": ".0f"}), ""]
 
 
 def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
