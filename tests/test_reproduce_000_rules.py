@@ -237,3 +237,42 @@ def test_the_fluctuation_threshold_scales_with_the_particle_count():
     assert flow_state(series, n_particles=int(N_REF_000)).state.value == "fluctuating"
     with pytest.raises(ParameterError, match="invalid n_particles = 0"):
         flow_state(series, n_particles=0)
+
+
+def _claims_values(ratio: float, exponent: float = 0.5) -> pl.DataFrame:
+    rows = []
+    for w in (60.0, 100.0, 150.0):
+        for phi in (0.59, 0.60):
+            u = 2.0 * w**exponent
+            r = {"W": w, "phi_bar": phi, "kn": 1e5, "B": 10.0, "H": 20.0, "branch": False,
+                 "u_slip": u, "u_max": ratio * u, "delta_095": 0.3 * w,
+                 "u_max_over_u_slip": ratio, "phi_plug": 0.63, "l_c": 11.5,
+                 "omega_ratio_shearing": 0.5, "wall_friction": 0.3}
+            rows.append({**r, **{f"{k}_se": 1e-3 * abs(v) for k, v in r.items()
+                                 if isinstance(v, float) and k not in ("W", "phi_bar", "kn",
+                                                                        "B", "H")}})
+    return pl.DataFrame(rows)
+
+
+def test_the_verdicts_on_000s_claims():
+    from granflow.studies.reproduce_000_report import verdicts
+
+    values = _claims_values(1.385)
+    points = values.select("W", "phi_bar").with_columns(parent=pl.lit(""),
+                                                        state=pl.lit("steady"))
+    tab = verdicts(points, values)
+    got = dict(zip(tab["claim (000)"].to_list(), tab["verdict"].to_list(), strict=True))
+    assert all(v == "holds" for v in got.values()), tab
+    # u ~ W^0.6 and a ratio of 1.34: those claims do not hold; a fluctuating run neither
+    bad = _claims_values(1.34, 0.6)
+    tab = verdicts(points.with_columns(state=pl.lit("fluctuating")), bad)
+    got = dict(zip(tab["claim (000)"].to_list(), tab["verdict"].to_list(), strict=True))
+    assert got["u_slip ∝ √W (W ≥ 100)"] == "does not hold"
+    assert got["u_max/u_slip = 1.37-1.40 for every W, φ̄"] == "does not hold"
+    assert got["δ0.95 ∝ W (W ≥ 100)"] == "holds"
+    assert got["states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above"] == \
+        "does not hold"
+    # no channel at 000's widths: nothing can be told
+    narrow = values.with_columns(pl.col("W") / 10)
+    tab = verdicts(points.with_columns(pl.col("W") / 10), narrow)
+    assert (tab["verdict"] == "cannot tell at this scale").all(), tab

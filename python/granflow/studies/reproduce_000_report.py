@@ -910,6 +910,175 @@ def _per_point_cost(paper: Any, rate: float) -> list[str]:
                            "core-hours": ",.0f", "cores for a day": ".0f"}), ""]
 
 
+#: 000's scale: its claims are made for W = 60-150 (the scaling claims for W >= 100)
+W_PAPER_MIN, W_SCALING_MIN = 60.0, 100.0
+#: 000 §3.2: l_c = 11.5 d (printed: 11.45-11.55); Omega/omega -> 1/2 in the shear zones
+L_C_PRINTED = (L_C_PAPER - 0.05, L_C_PAPER + 0.05)
+OMEGA_RATIO_PAPER = (0.5, 0.5)
+#: a claim holds where the measured value is within this many SEs of 000's interval
+VERDICT_SIGMA = 2.0
+
+
+def _judge(value: float, se: float, lo: float, hi: float) -> tuple[str, str]:
+    """(verdict, how far) of a value with its SE against 000's interval [lo, hi]."""
+    if not (math.isfinite(value) and math.isfinite(se) and se > 0):
+        return "cannot tell at this scale", NED
+    gap = max(lo - value, value - hi, 0.0)
+    far = f"{gap / se:.1f} SEs from {lo:g}" + (f"-{hi:g}" if hi != lo else "")
+    return ("holds" if gap <= VERDICT_SIGMA * se else "does not hold"), far
+
+
+def _pooled(g: pl.DataFrame, col: str) -> tuple[float, float]:
+    """The inverse-variance mean of ``col`` over the rows of ``g`` and its SE (NaN without
+    SEs)."""
+    v, e = g[col].to_numpy(), g[f"{col}_se"].to_numpy()
+    ok = np.isfinite(v) & np.isfinite(e) & (e > 0)
+    if not ok.any():
+        return (float(np.nanmean(v)) if np.isfinite(v).any() else math.nan), math.nan
+    w = 1 / e[ok] ** 2
+    return float(np.sum(w * v[ok]) / np.sum(w)), float(1 / np.sqrt(np.sum(w)))
+
+
+def verdicts(points: pl.DataFrame, values: pl.DataFrame,
+             profiles: pl.DataFrame | None = None) -> pl.DataFrame:
+    """000's claims (issue 36, item 4), each "holds", "does not hold" (the measured value more
+    than VERDICT_SIGMA SEs outside 000's interval) or "cannot tell at this scale" (no point at
+    000's widths, or no SE), with the measured value and the reason. At 000's widths only:
+    W >= W_SCALING_MIN for the scaling claims (the two widest steady widths there), W >=
+    W_PAPER_MIN for the others; k_n = 1e5 points (000: 1e6; fig. 10 finds phi and u the same).
+    With ``profiles`` (the steady k_n = 1e5 points' half profiles) also phi_ad from the
+    divergence of the kinetic coefficients in the loose zone (:func:`phi_ad_fits`)."""
+    st = _steady(values).filter(~pl.col("branch")) if values.height else values
+    rows: list[dict[str, Any]] = []
+
+    def add(claim: str, paper: str, measured: str, verdict: str, why: str) -> None:
+        rows.append({"claim (000)": claim, "000": paper, "measured here": measured,
+                     "verdict": verdict, "why": why})
+
+    widest = float(st["W"].max()) if st.height else math.nan  # type: ignore[arg-type]
+    scale_why = (f"the widest steady channel here is W = {widest:g}" if st.height
+                 else "no steady point")
+    # the scaling exponents between the two widest widths >= 100, per phi_bar, pooled
+    for raw, name, n0 in (("u_slip", "u_slip ∝ √W", 0.5), ("u_max", "u_max ∝ √W", 0.5),
+                          ("delta_095", "δ0.95 ∝ W", 1.0)):
+        ns, es = [], []
+        for (_,), g in st.filter(pl.col("W") >= W_SCALING_MIN).group_by(["phi_bar"]):
+            g = g.sort("W")
+            if g.height < 2:
+                continue
+            a, b = g.row(-2, named=True), g.row(-1, named=True)
+            span = math.log(b["W"] / a["W"])
+            ns.append(math.log(b[raw] / a[raw]) / span)
+            es.append(math.hypot(a[f"{raw}_se"] / a[raw], b[f"{raw}_se"] / b[raw]) / span)
+        if not ns:
+            add(name + " (W ≥ 100)", f"exponent {n0:g}", "-", "cannot tell at this scale",
+                scale_why + " (two steady widths >= 100 needed)")
+            continue
+        n, e = _pooled(pl.DataFrame({"n": ns, "n_se": es}), "n")
+        verdict, far = _judge(n, e, n0, n0)
+        add(name + " (W ≥ 100)", f"exponent {n0:g}", f"exponent {pm(n, e, 2)}", verdict,
+            far + f" ({len(ns)} φ̄)")
+    wide = st.filter(pl.col("W") >= W_PAPER_MIN)
+    # u_max/u_slip in 1.37-1.40 at every W and phi_bar: the worst width
+    if wide.height:
+        per = [(w, *_pooled(g, "u_max_over_u_slip"))
+               for (w,), g in wide.group_by(["W"], maintain_order=True)]
+        judged = [(w, m, e, *_judge(m, e, *RATIO_PAPER)) for w, m, e in per]
+        bad = [j for j in judged if j[3] == "does not hold"]
+        unknown = [j for j in judged if j[3] != "holds" and j[3] != "does not hold"]
+        show = bad or unknown or judged
+        verdict = ("does not hold" if bad else "cannot tell at this scale" if unknown
+                   else "holds")
+        add("u_max/u_slip = 1.37-1.40 for every W, φ̄", "1.37-1.40",
+            "; ".join(f"W = {w:g}: {pm(m, e, 3)}" for w, m, e, *_ in judged), verdict,
+            "; ".join(f"W = {w:g}: {far}" for w, _, _, _, far in show))
+    else:
+        add("u_max/u_slip = 1.37-1.40 for every W, φ̄", "1.37-1.40", "-",
+            "cannot tell at this scale", scale_why + " (000: W = 60-150)")
+    # the plug's phi, l_c, Omega/omega: pooled over 000's widths
+    for col, claim, paper, (lo, hi) in (
+            ("phi_plug", "plug φ ≈ 0.63", "0.63", PHI_PLUG_PRINTED),
+            ("l_c", "conduction length l_c = 11.5 d", "11.5", L_C_PRINTED),
+            ("omega_ratio_shearing", "Ω/ω → 1/2 in the shear zones", "1/2",
+             OMEGA_RATIO_PAPER)):
+        if not wide.height:
+            add(claim, paper, "-", "cannot tell at this scale", scale_why)
+            continue
+        m, e = _pooled(wide, col)
+        verdict, far = _judge(m, e, lo, hi)
+        add(claim, paper, pm(m, e, 4 if col == "phi_plug" else 3), verdict,
+            far + f" (W = {', '.join(f'{w:g}' for w in sorted(set(wide['W'])))})")
+    # mu_wall: independent of W (the widest two at each phi_bar), falls as phi_bar rises
+    mw = []
+    for (phi,), g in wide.group_by(["phi_bar"]):
+        g = g.sort("W")
+        if g.height >= 2:
+            a, b = g.row(0, named=True), g.row(-1, named=True)
+            mw.append((phi, b["wall_friction"] - a["wall_friction"],
+                       math.hypot(a["wall_friction_se"], b["wall_friction_se"])))
+    if mw:
+        zs = [dv / e for _, dv, e in mw]
+        ok = all(math.isfinite(z) for z in zs)
+        verdict = ("cannot tell at this scale" if not ok else
+                   "holds" if all(abs(z) <= VERDICT_SIGMA for z in zs) else "does not hold")
+        add("μ_wall independent of W", "independent of W (fig. 7b)",
+            "; ".join(f"φ̄ = {p:g}: {dv:+.4f} ± {e:.4f}" for p, dv, e in mw), verdict,
+            "change from the narrowest to the widest of 000's widths")
+    else:
+        add("μ_wall independent of W", "independent of W (fig. 7b)", "-",
+            "cannot tell at this scale", scale_why + " (two steady widths >= 60 needed)")
+    if profiles is not None and profiles.height:
+        fits = []
+        loose = profiles.filter(pl.col("zone") == "loose", pl.col("parent") == "")
+        for col, name in KINETIC:
+            f = fit_phi_ad(loose["phi"].to_numpy(), loose[col].to_numpy(),
+                           loose[f"{col}_se"].to_numpy())
+            fits.append((name.split(" ")[0], f["phi_ad"],
+                         math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1])))
+        judged = [(n, v, e, *_judge(v, e, PHI_AD_PAPER[0], PHI_AD_PAPER[0]))
+                  for n, v, e in fits]
+        verdict = ("does not hold" if any(j[3] == "does not hold" for j in judged)
+                   else "holds" if all(j[3] == "holds" for j in judged)
+                   else "cannot tell at this scale")
+        add("φ_ad: the kinetic coefficients diverge at 0.59 ± 0.002 (fig. 13)",
+            "0.59 ± 0.002", "; ".join(f"{n}: {pm(v, e, 4)}" for n, v, e, *_ in judged),
+            verdict, "; ".join(f"{n}: {far}" for n, _, _, _, far in judged)
+            + " (the SE with 000's ± 0.002)")
+    # the states: steady at 0.59-0.61, fluctuating at 0.62, jammed above (W >= 60)
+    flow = points.filter((pl.col("parent") == "") & (pl.col("W") >= W_PAPER_MIN)) \
+        if points.height else points
+    if flow.height:
+        want = {0.59: "steady", 0.60: "steady", 0.61: "steady", 0.62: "fluctuating"}
+        seen = [(r["W"], r["phi_bar"], r["state"]) for r in flow.iter_rows(named=True)
+                if round(r["phi_bar"], 2) in want]
+        miss = [(w, p, st_) for w, p, st_ in seen if st_ != want[round(p, 2)]]
+        add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
+            "steady / fluctuating / jammed", f"{len(seen) - len(miss)} of {len(seen)} runs "
+            "as 000", "holds" if not miss else "does not hold",
+            "; ".join(f"W = {w:g}, φ̄ = {p:g}: {st_}" for w, p, st_ in miss) or "-")
+    else:
+        add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
+            "steady / fluctuating / jammed", "-", "cannot tell at this scale",
+            "no run at W >= 60")
+    return pl.DataFrame(rows)
+
+
+def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
+                     profiles: pl.DataFrame) -> list[str]:
+    """000's claims, one line each (:func:`verdicts`)."""
+    if not points.height:
+        return []
+    tab = verdicts(points, values, profiles if profiles.height else None)
+    count = {v: int((tab["verdict"] == v).sum())
+             for v in ("holds", "does not hold", "cannot tell at this scale")}
+    return ["## 000's claims: verdicts", "",
+            f"Each claim against this dataset: 'holds' within {VERDICT_SIGMA:g} SEs of 000's "
+            "value (its printed digits' interval), 'does not hold' beyond, 'cannot tell at "
+            f"this scale' without a point at 000's widths (W >= {W_PAPER_MIN:g}; the scaling "
+            f"claims two steady widths >= {W_SCALING_MIN:g}) or without an SE. "
+            + ", ".join(f"{k}: {n}" for k, n in count.items()) + ".", "", md_table(tab), ""]
+
+
 def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     """The answers to the paper's claims, in words, from the tables below (``values``:
     :func:`point_values`)."""
@@ -1019,7 +1188,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
              f"`pl.read_parquet('{out}/points.parquet')` (one row per run; also "
              "`profiles.parquet`, half profiles with SEs and zone labels, `zones.parquet`, "
              "zone means, and `se_vs_time.parquet`). Section numbers (§) are 000's.", "",
-             *findings(points, values), *_runs_section(points, plan)]
+             *_verdict_section(points, values, profiles), *findings(points, values),
+             *_runs_section(points, plan)]
     figs: list[Path] = []
     sections = [_stiffness_section(points, values, profiles, means, zones, figdir),
                 _se_section(se, figdir), (_coverage_section(points, out), [])]
