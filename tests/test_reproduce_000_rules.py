@@ -276,3 +276,9 @@ def test_the_verdicts_on_000s_claims():
     narrow = values.with_columns(pl.col("W") / 10)
     tab = verdicts(points.with_columns(pl.col("W") / 10), narrow)
     assert (tab["verdict"] == "cannot tell at this scale").all(), tab
+
+
+def test_the_report_of_a_campaign_not_yet_begun(tmp_path):
+    path = write_report(tmp_path, tmp_path / "r.md", rp.widths_plan(), rp.paper_plan())
+    text = path.read_text()
+    assert "No finished point yet" in text and "--widths" in text and "44 planned" in text

@@ -1172,6 +1172,15 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     """Write the markdown report for the dataset in ``out`` (campaign ``plan``) to ``path``
     (figures beside it, in ``<path stem>_figures/``), with the cost of the ``paper`` plan."""
     raw = _read(out, "points")
+    if not raw.height:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        n = len(plan.points) + len(getattr(plan, "branches", ())) + len(getattr(plan, "later",
+                                                                              ()))
+        path.write_text(f"# Reproducing 000 ({plan.name} campaign)\n\nNo finished point yet "
+                        f"in {out}: {n} planned. Run `python -m granflow.studies.reproduce_000 "
+                        f"--{plan.name} --out {out} --report {path}`; it resumes from what is "
+                        "there.\n")
+        return path
     se = _read(out, "se_vs_time")
     # the 10-block rule, applied to the dataset as the analysis now applies it
     points = refuse_few_blocks(raw) if raw.height else raw
