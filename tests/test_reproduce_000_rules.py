@@ -282,3 +282,18 @@ def test_the_report_of_a_campaign_not_yet_begun(tmp_path):
     path = write_report(tmp_path, tmp_path / "r.md", rp.widths_plan(), rp.paper_plan())
     text = path.read_text()
     assert "No finished point yet" in text and "--widths" in text and "44 planned" in text
+
+
+def test_the_depth_check_is_its_own_table_and_stays_out_of_the_width_analyses():
+    from granflow.studies.reproduce_000_report import depth_table, main_depth
+
+    values = _claims_values(1.385).with_columns(replicas=pl.lit(3))
+    deep = values.filter((pl.col("W") == 60.0) & (pl.col("phi_bar") == 0.60))
+    both = pl.concat([values, deep.with_columns(B=pl.lit(20.0)),
+                      deep.with_columns(B=pl.lit(40.0), u_slip=pl.col("u_slip") * 1.05)])
+    assert main_depth(both).equals(values)
+    tab = depth_table(both)
+    assert tab["B"].to_list() == [10.0, 20.0, 40.0]
+    z = tab["u_slip vs B = 10 (SEs)"].to_list()
+    assert z[0] is None and abs(z[1]) < 1e-9 and z[2] > 20
+    assert not depth_table(values).height  # one depth: no check

@@ -97,6 +97,58 @@ def point_values(points: pl.DataFrame) -> pl.DataFrame:
     return rm.join(extra, on=list(POINT_BY), how="left").sort(["W", "phi_bar", "kn"])
 
 
+def main_depth(values: pl.DataFrame) -> pl.DataFrame:
+    """The points at the campaign's main depth (the most common B): the depth check's other
+    depths (:func:`depth_table`) stay out of the width tables, fits and verdicts."""
+    if not values.height:
+        return values
+    b = values["B"].mode().sort()[0]
+    return values.filter(pl.col("B") == b)
+
+
+#: the quantities of the depth check
+DEPTH_QUANTITIES = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "phi_plug",
+                    "wall_friction")
+
+
+def depth_table(values: pl.DataFrame) -> pl.DataFrame:
+    """The depth check: per (W, phi_bar, k_n) run at more than one B, each quantity of
+    DEPTH_QUANTITIES per B with its SE and its change from the main depth's value in combined
+    SEs (000 runs B = 40; the campaign B = 10)."""
+    if not values.height:
+        return pl.DataFrame()
+    b0 = values["B"].mode().sort()[0]
+    rows = []
+    for (w, phi, kn), g in values.filter(~pl.col("branch")).group_by(
+            ["W", "phi_bar", "kn"], maintain_order=True):
+        if g["B"].n_unique() < 2 or b0 not in g["B"].to_list():
+            continue
+        ref = g.filter(pl.col("B") == b0).row(0, named=True)
+        for r in g.sort("B").iter_rows(named=True):
+            row: dict[str, Any] = {"W": w, "φ̄": phi, "k_n": kn, "B": r["B"],
+                                   "replicas": r["replicas"]}
+            for q in DEPTH_QUANTITIES:
+                row[q] = pm(r[q], r[f"{q}_se"], 4)
+                if r["B"] != b0:
+                    se = math.hypot(r[f"{q}_se"], ref[f"{q}_se"])
+                    row[f"{q} vs B = {b0:g} (SEs)"] = ((r[q] - ref[q]) / se if se > 0
+                                                      else math.nan)
+            rows.append(row)
+    return pl.DataFrame(rows) if rows else pl.DataFrame()
+
+
+def _depth_section(values: pl.DataFrame) -> list[str]:
+    """The depth check as report lines (none without one)."""
+    tab = depth_table(values)
+    if not tab.height:
+        return []
+    return ["## Depth (B)", "",
+            "000 runs B = 40 d; this campaign B = 10 d. The same W, φ̄ and k_n at other depths: "
+            "each quantity with its SE and its change from the main depth in combined SEs "
+            "(blank at the main depth).", "",
+            md_table(tab, {c: "+.1f" for c in tab.columns if c.endswith("(SEs)")}), ""]
+
+
 def _steady(values: pl.DataFrame, kn: float | None = 1e5) -> pl.DataFrame:
     """The points of :func:`point_values` at ``kn`` (None: every k_n)."""
     d = values
@@ -1186,7 +1238,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     points = refuse_few_blocks(raw) if raw.height else raw
     profiles = _of_steady(points, refuse_few_blocks(raw, _read(out, "profiles")))
     zones = _of_steady(points, refuse_few_blocks(raw, _read(out, "zones")))
-    values = point_values(points) if points.height else pl.DataFrame()
+    every_depth = point_values(points) if points.height else pl.DataFrame()
+    values = main_depth(every_depth)
     steady = _steady(values).filter(~pl.col("branch")) if values.height else values
     means = mean_profiles(profiles)
     figdir = path.parent / f"{path.stem}_figures"
@@ -1198,7 +1251,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
              "`profiles.parquet`, half profiles with SEs and zone labels, `zones.parquet`, "
              "zone means, and `se_vs_time.parquet`). Section numbers (§) are 000's.", "",
              *_verdict_section(points, values, profiles), *findings(points, values),
-             *_runs_section(points, plan)]
+             *_depth_section(every_depth), *_runs_section(points, plan)]
     figs: list[Path] = []
     sections = [_stiffness_section(points, values, profiles, means, zones, figdir),
                 _se_section(se, figdir), (_coverage_section(points, out), [])]
