@@ -3,13 +3,13 @@ mean volume fractions phi_bar, and the stiffness test of its fig. 10, as resumab
 the report docs/reproduce_000.md.
 
     python -m granflow.studies.reproduce_000 --quick [--out DIR] [--report FILE]
-    python -m granflow.studies.reproduce_000 --full | --paper [--out DIR] [--report FILE]
-           [--workers N | --scheduler ADDRESS] [--reanalyse] [--only-report]
+    python -m granflow.studies.reproduce_000 --full | --widths | --paper [--out DIR]
+           [--report FILE] [--workers N | --scheduler ADDRESS] [--reanalyse] [--only-report]
 
 A *point* is one channel run, (W, phi_bar, k_n, seed) at depth B and periodic height H,
 prepared by fill and release (:class:`granflow.scenes.channel.Channel`, ``preparation =
-"pour"``: the soft pour the committed dataset was made with) and run in stints of
-``stint`` time units. It stops when
+Point.prep``: "pour", the soft pour the committed full dataset was made with, or 000's "rain",
+the widths plan's) and run in stints of ``stint`` time units. It stops when
 
 * it is **steady** and long enough (:func:`long_enough`), and only then are the SE targets
   consulted (:func:`converged`): the flow state of the last half of its centre-of-mass velocity
@@ -21,7 +21,7 @@ prepared by fill and release (:class:`granflow.scenes.channel.Channel`, ``prepar
   u_slip and u_max must be within ``se_target`` of their values (an SE from fewer than
   MIN_SE_BLOCKS blocks is NaN and meets no target). The minimum length keeps a run from
   stopping because its SE estimate happened to dip (optional stopping biases every SE small);
-  or
+  and no point stops before ``t_min`` (the widths plan: t = 1000); or
 * it is **arrested** (|vcm_y| < 1e-3 sqrt(g d) over the last half) at two stints running; or
 * it reached ``t_max`` (its last state is recorded: accelerating, decelerating, drifting, ...).
 
