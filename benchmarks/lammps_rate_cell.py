@@ -99,6 +99,7 @@ from typing import Any
 
 import numpy as np
 import polars as pl
+from granflow.analysis.compare import agrees, difference_z
 from granflow.analysis.replicas import replica_mean
 from granflow.analysis.rheology import cell_steady_start
 from granflow.analysis.stats import blocking
@@ -115,7 +116,6 @@ P_EXT = 1e-4
 CODES = ("granflow", "lammps")
 SERIES_COLUMNS = ("t", "phi", "sigma_xx", "sigma_yy", "sigma_zz", "sigma_xy")
 QUANTITIES = ("mu", "phi", "N1_p", "N2_p", "syy_pext")
-Z_AGREE = 2.0
 #: LAMMPS's controller response time to a compression, in t_c (module docstring)
 TAU_P = 0.1
 
@@ -380,15 +380,13 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
             continue
         gf, lm = by["granflow"], by["lammps"]
         for q in QUANTITIES:
-            diff = gf[q] - lm[q]
-            se = math.hypot(gf[f"{q}_se"], lm[f"{q}_se"])
-            z = diff / se if se > 0 else math.nan
+            diff, se, z = difference_z(gf[q], gf[f"{q}_se"], lm[q], lm[f"{q}_se"])
             rows.append({
                 "mu_s": mu_s, "I": inertial, "quantity": q,
                 "replicas_granflow": gf["replicas"], "replicas_lammps": lm["replicas"],
                 "granflow": gf[q], "granflow_se": gf[f"{q}_se"],
                 "lammps": lm[q], "lammps_se": lm[f"{q}_se"], "diff": diff, "diff_se": se, "z": z,
-                "verdict": "agrees" if abs(z) <= Z_AGREE else ("differs" if math.isfinite(z)
+                "verdict": "agrees" if agrees(z) else ("differs" if math.isfinite(z)
                                                                 else "no SE"),
             })  # fmt: skip
     return rdf, pl.from_dicts(rows, infer_schema_length=None) if rows else pl.DataFrame()

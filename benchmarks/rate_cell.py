@@ -140,6 +140,7 @@ def _stress_points() -> pl.DataFrame:
 
 
 def equivalence(a: argparse.Namespace) -> pl.DataFrame:
+    from granflow.analysis.compare import agrees
     from granflow.analysis.replicas import replica_mean
 
     stress = _stress_points()
@@ -173,7 +174,7 @@ def equivalence(a: argparse.Namespace) -> pl.DataFrame:
                          "stress_se": pt[f"{x}_se"], "rate": rate_row[x],
                          "rate_se": rate_row[f"{x}_se"], "runs": rr.height,
                          "slope_dI": slope, "diff": diff, "se": se, "z": diff / se,
-                         "verdict": "agrees" if abs(diff / se) <= 2 else "differs"})
+                         "verdict": "agrees" if agrees(diff / se) else "differs"})
     return pl.DataFrame(rows)
 
 

@@ -19,9 +19,11 @@ import numpy as np
 import polars as pl
 
 from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, scaled_profile_31
+from granflow.analysis.compare import AGREE_SIGMA, agrees, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import save_figure
 from granflow.analysis.replicas import replica_mean
+from granflow.analysis.rheology import pool_realizations
 from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
@@ -213,20 +215,16 @@ def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
     """u_max/u_slip per W (inverse-variance mean over phi_bar, rheology.pool_realizations;
     the plain mean, without an SE, where a phi_bar has none) and its distance from 000's range
     1.37-1.40, in SEs where there are SEs."""
-    from granflow.analysis.rheology import pool_realizations
-
-    cols = ["W", "u_max_over_u_slip", "u_max_over_u_slip_se"]
     rows = []
     for (w,), g in steady.sort("W").group_by(["W"], maintain_order=True):
         if g["u_max_over_u_slip_se"].is_finite().all():
-            r = pool_realizations(g.select(cols), by=["W"]).row(0, named=True)
-            m, e = r["u_max_over_u_slip"], r["u_max_over_u_slip_se"]
+            m, e = _pooled(g, "u_max_over_u_slip")
         else:
             m, e = float(g["u_max_over_u_slip"].mean()), math.nan  # type: ignore[arg-type]
         gap = max(RATIO_PAPER[0] - m, m - RATIO_PAPER[1], 0.0)
         rows.append({"W": w, "phi_bar": ", ".join(f"{p:g}" for p in g["phi_bar"]),
                      "u_max/u_slip": pm(m, e, 4), "below 1.37 by": gap,
-                     "in SEs": gap / e if e > 0 else math.nan,
+                     "in SEs": interval_z(m, e, *RATIO_PAPER),
                      "SE": "" if math.isfinite(e) else NED})
     return pl.DataFrame(rows)
 
@@ -967,34 +965,33 @@ W_PAPER_MIN, W_SCALING_MIN = 60.0, 100.0
 #: 000 §3.2: l_c = 11.5 d (printed: 11.45-11.55); Omega/omega -> 1/2 in the shear zones
 L_C_PRINTED = (L_C_PAPER - 0.05, L_C_PAPER + 0.05)
 OMEGA_RATIO_PAPER = (0.5, 0.5)
-#: a claim holds where the measured value is within this many SEs of 000's interval
-VERDICT_SIGMA = 2.0
-
-
 def _judge(value: float, se: float, lo: float, hi: float) -> tuple[str, str]:
     """(verdict, how far) of a value with its SE against 000's interval [lo, hi]."""
-    if not (math.isfinite(value) and math.isfinite(se) and se > 0):
+    z = interval_z(value, se, lo, hi)
+    if not math.isfinite(z):
         return "cannot tell at this scale", NED
-    gap = max(lo - value, value - hi, 0.0)
-    far = f"{gap / se:.1f} SEs from {lo:g}" + (f"-{hi:g}" if hi != lo else "")
-    return ("holds" if gap <= VERDICT_SIGMA * se else "does not hold"), far
+    far = f"{z:.1f} SEs from {lo:g}" + (f"-{hi:g}" if hi != lo else "")
+    return ("holds" if agrees(z) else "does not hold"), far
 
 
 def _pooled(g: pl.DataFrame, col: str) -> tuple[float, float]:
-    """The inverse-variance mean of ``col`` over the rows of ``g`` and its SE (NaN without
-    SEs)."""
-    v, e = g[col].to_numpy(), g[f"{col}_se"].to_numpy()
-    ok = np.isfinite(v) & np.isfinite(e) & (e > 0)
-    if not ok.any():
+    """The inverse-variance mean of ``col`` over the rows of ``g`` that have an SE, and its SE
+    (:func:`granflow.analysis.rheology.pool_realizations`); the plain mean and NaN where no
+    row has one."""
+    se = f"{col}_se"
+    ok = g.select(col, se).filter(pl.col(col).is_finite() & pl.col(se).is_finite()
+                                  & (pl.col(se) > 0))
+    if not ok.height:
+        v = g[col].to_numpy()
         return (float(np.nanmean(v)) if np.isfinite(v).any() else math.nan), math.nan
-    w = 1 / e[ok] ** 2
-    return float(np.sum(w * v[ok]) / np.sum(w)), float(1 / np.sqrt(np.sum(w)))
+    r = pool_realizations(ok.with_columns(_all=pl.lit(0)), ["_all"]).row(0, named=True)
+    return float(r[col]), float(r[se])
 
 
 def verdicts(points: pl.DataFrame, values: pl.DataFrame,
              profiles: pl.DataFrame | None = None) -> pl.DataFrame:
     """000's claims (issue 36, item 4), each "holds", "does not hold" (the measured value more
-    than VERDICT_SIGMA SEs outside 000's interval) or "cannot tell at this scale" (no point at
+    than AGREE_SIGMA SEs outside 000's interval) or "cannot tell at this scale" (no point at
     000's widths, or no SE), with the measured value and the reason. At 000's widths only:
     W >= W_SCALING_MIN for the scaling claims (the two widest steady widths there), W >=
     W_PAPER_MIN for the others; k_n = 1e5 points (000: 1e6; fig. 10 finds phi and u the same).
@@ -1072,7 +1069,7 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         zs = [dv / e for _, dv, e in mw]
         ok = all(math.isfinite(z) for z in zs)
         verdict = ("cannot tell at this scale" if not ok else
-                   "holds" if all(abs(z) <= VERDICT_SIGMA for z in zs) else "does not hold")
+                   "holds" if all(agrees(z) for z in zs) else "does not hold")
         add("μ_wall independent of W", "independent of W (fig. 7b)",
             "; ".join(f"φ̄ = {p:g}: {dv:+.4f} ± {e:.4f}" for p, dv, e in mw), verdict,
             "change from the narrowest to the widest of 000's widths")
@@ -1124,7 +1121,7 @@ def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
     count = {v: int((tab["verdict"] == v).sum())
              for v in ("holds", "does not hold", "cannot tell at this scale")}
     return ["## 000's claims: verdicts", "",
-            f"Each claim against this dataset: 'holds' within {VERDICT_SIGMA:g} SEs of 000's "
+            f"Each claim against this dataset: 'holds' within {AGREE_SIGMA:g} SEs of 000's "
             "value (its printed digits' interval), 'does not hold' beyond, 'cannot tell at "
             f"this scale' without a point at 000's widths (W >= {W_PAPER_MIN:g}; the scaling "
             f"claims two steady widths >= {W_SCALING_MIN:g}) or without an SE. "

@@ -14,6 +14,7 @@ import numpy as np
 import polars as pl
 
 from granflow.analysis import rheology as rh
+from granflow.analysis.compare import AGREE_SIGMA, agrees, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.replicas import DISAGREE_P, replica_mean
 
@@ -24,10 +25,10 @@ from .reproduce_002_figures import plot_figures
 PARAMS = (("A1", "mu1"), ("A2", "mu2"), ("A3", "mu3"), ("A4", "phi"), ("mu1_0", "mu1"),
           ("a1", "mu1"), ("mu2_0", "mu2"), ("a2", "mu2"), ("mu3_0", "mu3"), ("a3", "mu3"),
           ("phi_0", "phi"), ("a4", "phi"))
-#: agreement: the fit and the paper's value differ by at most this many fit errors
-AGREE_SIGMA = 2.0
 #: a fit error above this fraction of the value leaves the parameter undetermined
 UNDETERMINED = 0.5
+
+
 def _offset_phrase(off: pl.DataFrame, mu: float, col: str, p: float) -> str:
     """``+0.0221 +- 0.0008 (27 SE)`` for one offset of :func:`offsets`, or "(no data)"."""
     r = off.filter((pl.col("mu_s") == mu) & ((pl.col("p_ext") / p - 1).abs() < 1e-9))
@@ -35,7 +36,7 @@ def _offset_phrase(off: pl.DataFrame, mu: float, col: str, p: float) -> str:
         return "(no data)"
     v, e = float(r[f"{col} - paper"][0]), float(r[f"{col} - paper SE"][0])
     z = abs(v) / e if e > 0 else math.inf
-    return f"{v:+.4f} +- {e:.4f} ({'within 2 SE' if z <= AGREE_SIGMA else f'{z:.0f} SE'})"
+    return f"{v:+.4f} +- {e:.4f} ({'within 2 SE' if agrees(z) else f'{z:.0f} SE'})"
 
 
 def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame,
@@ -246,11 +247,10 @@ def table_rows(fits: Mapping[float, Mapping[str, rh.FitResult]]) -> pl.DataFrame
             # (the paper's value is known to half a unit of its last printed digit: the
             # distance is to that interval)
             half = 0.5 * rh.printed_unit(name)
-            z = (max(0.0, abs(v - pv) - half) / e if (math.isfinite(pv) and e > 0)
-                 else math.nan)
+            z = interval_z(v, e, pv - half, pv + half)
             verdict = ("-" if not math.isfinite(z)
                        else "not determined" if e > UNDETERMINED * max(abs(v), abs(pv))
-                       else "agrees" if z <= AGREE_SIGMA else f"differs ({z:.1f} sigma)")
+                       else "agrees" if agrees(z) else f"differs ({z:.1f} sigma)")
             rows.append({"mu_s": mu, "parameter": name, "fit": v, "fit_err": e,
                          "red_chi2": fr.red_chi2 if fr is not None else math.nan,
                          "n_points": fr.n if fr is not None else 0,
@@ -342,7 +342,7 @@ def curve_comparison(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.Fi
                          "largest |ours - paper|": float(np.max(np.abs(ours - theirs))),
                          "at I": float(grid[int(np.argmax(np.abs(ours - theirs)))]),
                          "largest |z|": float(abs(z[j])), "at I (z)": float(grid[j]),
-                         "verdict": "agrees" if abs(z[j]) <= AGREE_SIGMA
+                         "verdict": "agrees" if agrees(z[j])
                          else f"differs ({abs(z[j]):.1f} sigma)"})
     return pl.DataFrame(rows)
 
