@@ -74,3 +74,20 @@ def _running(pid: int) -> bool:
     except FileNotFoundError:
         return False
     return stat.split(") ")[1][0] != "Z"
+
+
+def _threads_of(i: int, threads: int) -> tuple[int, int]:
+    return i, threads
+
+
+def test_map_tasks_gives_each_task_the_threads_asked_for() -> None:
+    from granflow.errors import ParameterError
+    from granflow.study import map_tasks
+
+    ncores = os.cpu_count() or 1
+    # default: cores/workers (so two campaigns side by side each ask for threads=1)
+    assert dict(map_tasks(_threads_of, [(0,)], workers=1)) == {0: (0, ncores)}
+    assert dict(map_tasks(_threads_of, [(0,), (1,)], workers=1, threads=1)) \
+        == {0: (0, 1), 1: (1, 1)}
+    with pytest.raises(ParameterError, match="threads = 0"):
+        list(map_tasks(_threads_of, [(0,)], workers=1, threads=0))

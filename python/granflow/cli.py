@@ -38,7 +38,8 @@ def _cmd_sweep(a: argparse.Namespace) -> int:
                              "parameter = [values]")
     if not isinstance(seeds, list) or not all(isinstance(x, int) for x in seeds):
         raise ParameterError(f"invalid seeds = {seeds!r}: allowed a list of integers")
-    df = run_grid(spec, grid, a.out, seeds=seeds, workers=a.workers, scheduler=a.scheduler)
+    df = run_grid(spec, grid, a.out, seeds=seeds, workers=a.workers, scheduler=a.scheduler,
+                  threads=a.threads)
     out = Path(a.out) / "sweep.parquet"
     df.write_parquet(out)
     pl.Config.set_tbl_cols(-1)
@@ -108,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="local processes (default: one per core, at most one per run)")
     w.add_argument("--scheduler", default=None,
                    help="a Dask scheduler address (tcp://host:port) to run on instead")
+    w.add_argument("--threads", type=int, default=None,
+                   help="threads per run (default: cores/workers)")
     w.set_defaults(fn=_cmd_sweep)
     s = sub.add_parser("summary", help="print a run's analysis with error bars",
                        description="Print the summary (means ± standard errors) of a run.")

@@ -94,13 +94,17 @@ def _die_with_parent() -> None:
 
 def map_tasks(fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],
               workers: int | None = None,
-              scheduler: str | Any | None = None) -> Iterator[tuple[int, Any]]:
+              scheduler: str | Any | None = None,
+              threads: int | None = None) -> Iterator[tuple[int, Any]]:
     """``fn(*a, threads)`` for every ``a`` in ``args``, yielded as ``(index, result)`` as each
     finishes (so a caller can keep every finished result when the rest is stopped).
 
     Locally ``workers`` processes (default: one per core, at most one per task), each run with
-    cores/workers threads; with ``scheduler`` (a Dask scheduler address or a
-    ``distributed.Client``) there, one thread each."""
+    ``threads`` threads (default cores/workers: set it where other work shares the cores);
+    with ``scheduler`` (a Dask scheduler address or a ``distributed.Client``) there, one
+    thread each."""
+    if threads is not None and threads < 1:
+        raise ParameterError(f"invalid threads = {threads}: allowed an integer >= 1")
     if not args:
         return
     if scheduler is not None:
@@ -118,7 +122,7 @@ def map_tasks(fn: Callable[..., Any], args: Sequence[tuple[Any, ...]],
         return
     ncores = os.cpu_count() or 1
     workers = workers or min(ncores, len(args))
-    threads = max(1, ncores // workers)
+    threads = threads or max(1, ncores // workers)
     if workers == 1:
         for i, a in enumerate(args):
             yield i, fn(*a, threads)
@@ -139,10 +143,12 @@ def run_grid(
     seeds: Sequence[int] = (0,),
     workers: int | None = None,
     scheduler: str | Any | None = None,
+    threads: int | None = None,
 ) -> pl.DataFrame:
     """Run every combination of ``grid`` (and seed) and return one row per run.
 
-    ``workers`` defaults to the number of cores (each run then gets cores/workers threads);
+    ``workers`` defaults to the number of cores (each run then gets ``threads`` threads,
+    default cores/workers);
     ``scheduler`` is a Dask scheduler address (or a ``distributed.Client``) to run there."""
     check_grid(validate_spec(base), grid)
     tasks = expand(base, grid, seeds)
@@ -150,7 +156,8 @@ def run_grid(
     dirs = [str(hive_dir(root, part)) for part, _ in tasks]
     rows: list[dict[str, Any]] = [{} for _ in tasks]
     args = [(spec, dd) for (_, spec), dd in zip(tasks, dirs, strict=True)]
-    for i, row in map_tasks(_one, args, workers=workers, scheduler=scheduler):
+    for i, row in map_tasks(_one, args, workers=workers, scheduler=scheduler,
+                             threads=threads):
         rows[i] = row
     parts = [part for part, _ in tasks]
     return pl.DataFrame([{**p, **r} for p, r in zip(parts, rows, strict=True)])

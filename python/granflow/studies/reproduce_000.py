@@ -407,12 +407,13 @@ def _describe(row: dict[str, Any]) -> str:
 
 
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
-                 scheduler: str | None = None, log: Any = print) -> pl.DataFrame:
+                 scheduler: str | None = None, log: Any = print,
+                 threads: int | None = None) -> pl.DataFrame:
     """Run the points of ``plan`` not yet in ``out/points.parquet`` (with the branches whose
     parents are done, first), then the other branches (their parents are done by then), then
     its later points; each finished point is appended there as it completes."""
-    kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "describe": _describe,
-                          "log": log}
+    kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "threads": threads,
+                          "describe": _describe, "log": log}
     done = done_keys(Path(out), Point)
     ready = tuple(b for b in plan.branches if b.parent in done)
     run_points(STUDY, (*ready, *plan.points), plan, out, name=plan.name, **kw)

@@ -328,11 +328,12 @@ def describe(row: dict[str, Any]) -> str:
 
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None,
-                 log: Callable[[str], Any] = print) -> pl.DataFrame:
+                 log: Callable[[str], Any] = print,
+                 threads: int | None = None) -> pl.DataFrame:
     """Run the points of ``plan`` not yet in ``out/points.parquet``; each finished point is
     appended there as it completes (local process pool by default, or a Dask scheduler)."""
     return run_points(STUDY, plan.points, plan, out, workers=workers, scheduler=scheduler,
-                      describe=describe, log=log, name=plan.name)
+                      threads=threads, describe=describe, log=log, name=plan.name)
 
 
 def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:

@@ -14,8 +14,9 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         options: Mapping[str, tuple[str, str]] | None = None) -> None:
     """The command line of a reproduction campaign: ``--quick`` (default), ``--full`` or
     ``--paper`` (``plans``: name -> (plan factory, help)), ``--out``, ``--report``,
-    ``--workers`` / ``--scheduler``, ``--reanalyse``, ``--only-report``; ``options`` (name ->
-    (default, help)) are further string options, passed to ``write_report`` by keyword."""
+    ``--workers`` / ``--threads`` / ``--scheduler``, ``--reanalyse``, ``--only-report``;
+    ``options`` (name -> (default, help)) are further string options, passed to
+    ``write_report`` by keyword."""
     import argparse
 
     ap = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
@@ -26,7 +27,11 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     ap.add_argument("--out", default=None, help=f"dataset directory (default results/{stem}_"
                     f"<mode>; the committed full campaign: docs/data/{stem})")
     ap.add_argument("--report", default=None, help="report file (default OUT/report.md)")
-    ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--workers", type=int, default=None,
+                    help="local processes (default: one per core)")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="threads per point (default: cores/workers; 1 where another campaign "
+                    "shares the cores)")
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
     ap.add_argument("--only-report", action="store_true", help="no runs, the report only")
     ap.add_argument("--reanalyse", action="store_true",
@@ -40,7 +45,7 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     if a.reanalyse:
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
     if not a.only_report:
-        run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler)
+        run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler, threads=a.threads)
     path = write_report(out, Path(a.report) if a.report else out / "report.md", plan,
                         **{k: getattr(a, k) for k in options or {}})
     print(f"report: {path}")

@@ -239,11 +239,12 @@ def _context(info: Mapping[str, Any], d: Path) -> dict[str, Any]:
 
 def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.PathLike[str], *,
                workers: int | None = None, scheduler: str | None = None,
-               describe: Callable[[dict[str, Any]], str] = str,
+               threads: int | None = None, describe: Callable[[dict[str, Any]], str] = str,
                log: Callable[[str], Any] = print, name: str = "campaign") -> pl.DataFrame:
     """Run (:func:`run_point`) the ``points`` not yet in ``out/points.parquet`` (local process
     pool by default, or a Dask scheduler); each finished row is appended there at once, and the
     list of rows under each key ``k`` of ``study.tables`` to ``out/<study.tables[k]>.parquet``.
+    ``threads`` per point (default cores/workers; :func:`granflow.study.map_tasks`).
     Returns the whole points table."""
     from granflow.study import map_tasks
 
@@ -254,7 +255,8 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
     todo = [p for p in points if p.key not in done]
     log(f"{name}: {len(points)} points, {len(points) - len(todo)} done, {len(todo)} to run")
     args = [(study, p, plan, str(outp / "work")) for p in todo]
-    for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler):
+    for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler,
+                            threads=threads):
         extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
         write_rows(outp / "points.parquet", [row], append=True, point=cls)
         for stem, rows in extras.items():
