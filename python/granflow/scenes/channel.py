@@ -484,16 +484,24 @@ class Channel(SceneParameters):
         d, vs, h_fill, x = self._column(PHI_INSERT)
         soft = self._relax_material(min(self.mat.kn_value, self.prep_kn))
         prep_law = soft.law()
-        walls = _floor_walls(self.W)
         dt = soft.contact_time("lightest", d) / POUR_DT_DIVISOR
-        box = Box(length=(self.W, h_fill, self.B), periodic=(False, False, True))
-        sim = Simulation(x, d, box, prep_law, walls=walls, gravity=self.gravity, dt=dt,
-                         threads=self.threads, density=self.mat.density, skin=self.mat.skin)
+        sim = self._floor_sim(x, d, h_fill, self.B, prep_law, dt)
         say(f"inserted {len(d)} spheres at phi = {PHI_INSERT} in a {self.W:g} x {h_fill:.4g} x "
             f"{self.B:g} box; pouring (kn = {prep_law.kn:g}, frictionless, dt = {dt:.3g})")
         ke = self._settle(sim, d, h_fill, "the bed")
-        return _Pour(d, sim.get_positions(), h_fill, vs, prep_law, dt, walls, float(sim.time),
-                     sim.step, ke)
+        return _Pour(d, sim.get_positions(), h_fill, vs, prep_law, dt, _floor_walls(self.W),
+                     float(sim.time), sim.step, ke)
+
+    def _floor_sim(self, x: np.ndarray, d: np.ndarray, h: float, depth: float,
+                   law: ContactLaw, dt: float | None, wall_law: ContactLaw | None = None,
+                   skin: float | None = None) -> Simulation:
+        """A preparation's simulation: the spheres in a W x h x depth box (periodic along z
+        only) on a floor (:func:`_floor_walls`), under gravity."""
+        box = Box(length=(self.W, h, depth), periodic=(False, False, True))
+        return Simulation(x, d, box, law, walls=_floor_walls(self.W), wall_law=wall_law,
+                          gravity=self.gravity, dt=dt, threads=self.threads,
+                          density=self.mat.density,
+                          skin=self.mat.skin if skin is None else skin)
 
     def _column(self, phi: float, depth: float | None = None
                 ) -> tuple[np.ndarray, float, float, np.ndarray]:
@@ -579,12 +587,8 @@ class Channel(SceneParameters):
         run's stiffness (frictionless, damped, same geometry and load) so the release does not
         start with a burst of stored elastic energy at large kn."""
         stiff = self._relax_material(self.mat.kn_value)
-        rel_box = Box(length=(self.W, p.h_fill, self.B), periodic=(False, False, True))
-        stiff_sim = Simulation(x, p.d, rel_box, stiff.law(), walls=p.walls,
-                               gravity=self.gravity,
-                               dt=stiff.contact_time("lightest", p.d) / POUR_DT_DIVISOR,
-                               threads=self.threads, density=self.mat.density,
-                               skin=self.mat.skin)
+        stiff_sim = self._floor_sim(x, p.d, p.h_fill, self.B, stiff.law(),
+                                    stiff.contact_time("lightest", p.d) / POUR_DT_DIVISOR)
         for _ in range(RELAX_ROUNDS):
             stiff_sim.run(RELAX_ROUND_STEPS, progress=False)
             stiff_sim.set_velocities(np.zeros_like(x))
@@ -639,15 +643,11 @@ class Channel(SceneParameters):
         tiles = self.rain_tiles
         depth = self.B / tiles
         d, vs, h_col, x = self._column(self.rain_phi, depth)
-        walls = _floor_walls(self.W)
         law, wall_law, dt = self._rain_laws()
-        box = Box(length=(self.W, h_col, depth), periodic=(False, False, True))
         # (the wider skin where the slab's period holds it: >= 2 (d_max + skin))
         skin = max(self.mat.skin or kernel_default_skin(),
                    min(RAIN_SKIN, 0.5 * depth - float(d.max()) - 1e-9))
-        sim = Simulation(x, d, box, law, walls=walls, wall_law=wall_law,
-                         gravity=self.gravity, dt=dt, threads=self.threads,
-                         density=self.mat.density, skin=skin)
+        sim = self._floor_sim(x, d, h_col, depth, law, dt, wall_law, skin)
         say(f"inserted {len(d)} spheres at phi = {self.rain_phi:g} in a {self.W:g} x "
             f"{h_col:.4g} x {depth:g} column"
             f"{f' (1 of {tiles} slabs along z)' if tiles > 1 else ''}; raining (kn = {law.kn:g}"
@@ -657,9 +657,8 @@ class Channel(SceneParameters):
         if self._soft_rain:
             say(f"rained soft: at rest at t = {t:.1f} sqrt(d/g), {steps} steps; stiffening "
                 f"to kn = {self.law.kn:g}")
-            stiff = Simulation(pos, d, box, self.law, walls=walls, wall_law=self.wall_law,
-                               gravity=self.gravity, dt=self.timestep, threads=self.threads,
-                               density=self.mat.density, skin=skin)
+            stiff = self._floor_sim(pos, d, h_col, depth, self.law, self.timestep,
+                                    self.wall_law, skin)
             # a bed at rest: no fall to wait for, only the soft overlaps (load/rain_kn) to
             # spring back, within a few sound crossings (H/sqrt(kn) << 1): checked often
             ke = self._settle(stiff, d, 0.0, "the stiffened bed", top_tol=RAIN_TOP_TOL,
@@ -669,7 +668,7 @@ class Channel(SceneParameters):
             # the slab repeated along z (periodic there: the copies join without a seam)
             pos = np.concatenate([pos + np.array([0.0, 0.0, j * depth]) for j in range(tiles)])
             d, vs = np.tile(d, tiles), vs * tiles
-        return _Pour(d, pos, h_col, vs, self.law, dt, walls, t, steps, ke)
+        return _Pour(d, pos, h_col, vs, self.law, dt, _floor_walls(self.W), t, steps, ke)
 
     def _prepare_rain(self, say: _Stages) -> None:
         """000's fill and release: rain (:meth:`_rain`); a bed whose rough top rises above H
