@@ -749,9 +749,11 @@ class Channel(SceneParameters):
         # enough never wraps it)
         tree = cKDTree(x, boxsize=[self.W + 4.0 * d.max(), self.H, self.B])
         scale = np.ones(len(d))
-        pairs = np.array(sorted({(int(i), int(j)) for i in seam
-                                 for j in tree.query_ball_point(x[i], float(d.max()))
-                                 if j != i}), dtype=int).reshape(-1, 2)
+        # (top > H: the seam holds at least one sphere, itself among its neighbours)
+        near = tree.query_ball_point(x[seam], float(d.max()))
+        i = np.repeat(seam, [len(n) for n in near])
+        j = np.concatenate(near).astype(int)
+        pairs = np.unique(np.stack([i, j], axis=1)[i != j], axis=0)
         dist = np.linalg.norm(_min_image(x[pairs[:, 1]] - x[pairs[:, 0]], self.H, self.B),
                               axis=1)
         for _ in range(50):
