@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 from granflow.analysis import channel as ach
+from granflow.analysis.compare import difference_z
 from granflow.analysis.stats import MIN_SE_BLOCKS, steady_state_start
 from granflow.scenes.channel import Channel
 
@@ -149,9 +150,8 @@ def compare(r1: dict[str, Any], r2: dict[str, Any], phi_claimed: bool) -> dict[s
         }
     for q in ("u_slip", "u_max", "u_max_over_u_slip"):
         a, b = r1[q], r2[q]
-        s = math.hypot(a["se"], b["se"])
-        out[q] = {"a": a["value"], "b": b["value"], "diff": a["value"] - b["value"], "se": s,
-                  "z": (a["value"] - b["value"]) / s if s > 0 else float("nan")}
+        diff, s, z = difference_z(a["value"], a["se"], b["value"], b["se"])
+        out[q] = {"a": a["value"], "b": b["value"], "diff": diff, "se": s, "z": z}
     return out
 
 

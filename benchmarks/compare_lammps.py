@@ -34,6 +34,7 @@ from typing import Any
 
 import granflow as gf
 import numpy as np
+from granflow.analysis.compare import difference_z
 from granflow.analysis.stats import blocking, mean_se
 from granflow.io import _jsonable, write_lammps_data
 from granflow.material import kernel_default_skin
@@ -364,8 +365,7 @@ def part_run(a: argparse.Namespace, wd: Path) -> dict[str, Any]:
     for k in g:
         a_g, a_l = np.asarray(g[k]), np.asarray(lm[k])
         m_g, m_l = blocking(a_g[1:], every * DT), blocking(a_l[1:], every * DT)
-        se = math.hypot(m_g.se, m_l.se)
-        z = (m_g.mean - m_l.mean) / se if se > 0 else float("nan")
+        _, se, z = difference_z(m_g.mean, m_g.se, m_l.mean, m_l.se)
         # samples 1-10 (step 0 differs by the set-up slip convention, see part 'forces')
         early = float(np.max(np.abs(a_g[1:11] - a_l[1:11])) / np.mean(np.abs(a_l[1:11])))
         out["quantities"][k] = {

@@ -15,7 +15,6 @@ the combined SE). Series are kept in benchmarks/out/omega_g_reading/ (resumable)
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -67,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--only-table", action="store_true")
     a = ap.parse_args(argv)
+    from granflow.analysis.compare import difference_z
     from granflow.analysis.replicas import replica_mean
     from granflow.studies._campaign.cell import Point, point_row
     from granflow.studies.reproduce_002 import full_plan
@@ -94,10 +94,10 @@ def main(argv: list[str] | None = None) -> int:
     out = []
     for x in COMPARED:
         lv, bv = lit_m.row(0, named=True), base_m.row(0, named=True)
-        se = math.hypot(lv[f"{x}_se"], bv[f"{x}_se"])
+        diff, _, z = difference_z(lv[x], lv[f"{x}_se"], bv[x], bv[f"{x}_se"])
         out.append({"quantity": x, "printed_literal": lv[x], "literal_se": lv[f"{x}_se"],
                     "project_reading": bv[x], "reading_se": bv[f"{x}_se"],
-                    "diff": lv[x] - bv[x], "z": (lv[x] - bv[x]) / se,
+                    "diff": diff, "z": z,
                     "replicas": f"{lit_m['replicas'][0]} / {base_m['replicas'][0]}"})
     print(f"mu_s = {a.mu:g}, tau/p = {a.tau:g}, N = 2000, p_ext = 1e-4; states (literal): "
           + ", ".join(lit["state"].to_list()))

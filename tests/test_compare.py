@@ -3,7 +3,6 @@
 import math
 
 import pytest
-
 from granflow.analysis.compare import AGREE_SIGMA, agrees, difference_z, interval_z
 
 

@@ -19,7 +19,7 @@ import numpy as np
 import polars as pl
 
 from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, scaled_profile_31
-from granflow.analysis.compare import AGREE_SIGMA, agrees, interval_z
+from granflow.analysis.compare import AGREE_SIGMA, agrees, difference_z, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import save_figure
 from granflow.analysis.replicas import replica_mean
@@ -132,9 +132,8 @@ def depth_table(values: pl.DataFrame) -> pl.DataFrame:
             for q in DEPTH_QUANTITIES:
                 row[q] = pm(r[q], r[f"{q}_se"], 4)
                 if r["B"] != b0:
-                    se = math.hypot(r[f"{q}_se"], ref[f"{q}_se"])
-                    row[f"{q} vs B = {b0:g} (SEs)"] = ((r[q] - ref[q]) / se if se > 0
-                                                      else math.nan)
+                    row[f"{q} vs B = {b0:g} (SEs)"] = difference_z(
+                        r[q], r[f"{q}_se"], ref[q], ref[f"{q}_se"])[2]
             rows.append(row)
     return pl.DataFrame(rows) if rows else pl.DataFrame()
 
