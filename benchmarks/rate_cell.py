@@ -25,7 +25,8 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,57 +45,97 @@ SHOWN = {"settling": ("I_set", "state", "strain_total", "start_strain", "start_t
                          "stress_se", "rate", "rate_se", "runs", "diff", "se", "z", "verdict")}
 
 
+@dataclass(frozen=True)
+class CellRun:
+    """One rate-cell run of this benchmark (the engine's point; ``key``: its series file's
+    stem, the name of its work directory)."""
+
+    stem: str
+    N: int
+    mu: float
+    I: float  # noqa: E741
+    normal: str
+    seed: int
+    strain: float | None
+    length_tc: float | None
+    sample_every: int
+    stint: int
+
+    @property
+    def key(self) -> str:
+        return self.stem
+
+
+def _sheared_steps(c: Any, run: CellRun) -> tuple[int, int]:
+    """(steps of the whole sheared part, steps done): ``strain`` after the switch, or
+    ``length_tc`` t_c plus a fifth for the transient, in whole sampling intervals."""
+    dt = c.timestep
+    span = (run.strain / c.shear_rate if run.strain is not None
+            else 1.2 * float(run.length_tc) * c.t_c)
+    steps = int(math.ceil(span / dt / run.sample_every)) * run.sample_every
+    return steps, round((c.core.time - c.shear_start_time) / dt)
+
+
+def _study() -> Any:
+    """The engine's study of one rate-cell run (granflow.studies._campaign.engine): it runs
+    the sheared part in stints, each ending with a checkpoint and the series so far, and
+    stops when the budget of :func:`_sheared_steps` is spent."""
+    from granflow.scenes import RateCell
+    from granflow.studies._campaign.engine import Study
+
+    class RateCellRuns(Study):
+        def scene(self, point: CellRun, plan: Any, threads: int) -> Any:
+            return RateCell(N=point.N, mu=point.mu, p_ext=P_EXT, inertial_number=point.I,
+                            normal=point.normal, seed=point.seed,
+                            sample_every=point.sample_every, threads=threads)
+
+        def next_steps(self, scene: Any, point: CellRun, plan: Any) -> int:
+            steps, done = _sheared_steps(scene, point)
+            return min(point.stint, max(steps - done, 0))
+
+        def context(self, scene: Any) -> dict[str, Any]:
+            return {"t_c": scene.t_c, "shear_start": scene.shear_start_time,
+                    "shear_rate_set": scene.shear_rate}
+
+        def progress(self, scene: Any, prep_seconds: float) -> dict[str, Any]:
+            return {"strain": (scene.core.time - scene.shear_start_time) * scene.shear_rate}
+
+        def row(self, point: CellRun, plan: Any, tables: Mapping[str, Any],
+                context: Mapping[str, Any]) -> dict[str, Any]:
+            return {"state": "running", **context}
+
+        def stop(self, row: Mapping[str, Any], point: CellRun, plan: Any,
+                 history: Sequence[str]) -> str | None:
+            print(f"  {point.stem}: strain {row['strain']:.3f}", flush=True)
+            return None  # (to the end of the budget: next_steps gives 0)
+
+    return RateCellRuns()
+
+
 def run_cell(path: Path, *, N: int, mu: float, I: float, normal: str, seed: int,  # noqa: E741
              strain: float | None = None, length_tc: float | None = None,
              sample_every: int = 200, stint: int = 2_000_000) -> pl.DataFrame:
     """Run (or read) one rate cell: ``strain`` after the switch, or ``length_tc`` t_c plus
     a fifth for the transient; the sheared part of its series (with t_c in the metadata).
-    Runs in stints of ``stint`` steps, each ending with a checkpoint and the series so far in
-    ``<path's folder>/work/<path's stem>/``: a stopped run goes on from there (the slow flows
-    take hours)."""
+    Runs in stints of ``stint`` steps (the campaign engine's
+    :func:`~granflow.studies._campaign.engine.run_point`), each ending with a checkpoint and
+    the series so far in ``<path's folder>/work/<path's stem>/``: a stopped run goes on from
+    there (the slow flows take hours)."""
     if path.exists():
         return pl.read_parquet(path)
-    import json
+    from granflow.studies._campaign.engine import run_point
 
-    import pyarrow.parquet as pq
-    from granflow import io
-    from granflow.scenes import RateCell
-
-    work = path.parent / "work" / path.stem
-    ck, part, meta = work / "cell.gfck", work / "series.parquet", work / "meta.json"
-    c = RateCell(N=N, mu=mu, p_ext=P_EXT, inertial_number=I, normal=normal, seed=seed,
-                 sample_every=sample_every, threads=1)
-    t0 = time.perf_counter()
-    wall0 = 0.0
-    if ck.exists() and meta.exists():
-        c.restore(ck)
-        c.load_tables({"series": pq.read_table(part)})
-        wall0 = float(json.loads(meta.read_text())["wall_s"])
-    else:
-        c.prepare(progress=False)
-    dt = c.timestep
-    assert dt is not None and c.shear_start_time is not None
-    span = strain / c.shear_rate if strain is not None else 1.2 * float(length_tc) * c.t_c
-    steps = int(math.ceil(span / dt / sample_every)) * sample_every
-    work.mkdir(parents=True, exist_ok=True)
-    while (left := steps - round((c.core.time - c.shear_start_time) / dt)) > 0:
-        c.run(min(stint, left), progress=False)
-        io.write_parquet(c.tables()["series"], part)
-        c.save_checkpoint(ck)
-        wall = wall0 + time.perf_counter() - t0
-        meta.write_text(json.dumps({"wall_s": wall}))
-        done = (c.core.time - c.shear_start_time) * c.shear_rate
-        print(f"  {path.stem}: strain {done:.3f} of {span * c.shear_rate:g}, {wall:.0f} s",
-              flush=True)
-    wall = wall0 + time.perf_counter() - t0
-    s = pl.from_arrow(c.tables()["series"])
-    assert isinstance(s, pl.DataFrame)
-    s = s.filter(pl.col("t") > c.shear_start_time).with_columns(
-        t_c=pl.lit(c.t_c), shear_start=pl.lit(c.shear_start_time),
-        wall_s=pl.lit(wall), shear_rate_set=pl.lit(c.shear_rate))
+    run = CellRun(path.stem, N, mu, I, normal, seed, strain, length_tc, sample_every, stint)
+    row = run_point(_study(), run, None, str(path.parent / "work"), threads=1)
+    if "error" in row:
+        raise RuntimeError(f"{path.stem}: {row['error']}")
+    s = pl.read_parquet(path.parent / "work" / path.stem / "series.parquet")
+    s = s.filter(pl.col("t") > row["shear_start"]).with_columns(
+        t_c=pl.lit(row["t_c"]), shear_start=pl.lit(row["shear_start"]),
+        wall_s=pl.lit(row["wall_seconds"]), shear_rate_set=pl.lit(row["shear_rate_set"]))
     path.parent.mkdir(parents=True, exist_ok=True)
     s.write_parquet(path)
-    print(f"  {path.name}: {steps:,} steps, {wall:.0f} s", flush=True)
+    print(f"  {path.name}: strain {row['strain']:.3f}, {row['wall_seconds']:.0f} s", flush=True)
     return s
 
 
