@@ -4,6 +4,7 @@ the channel's material, laid over the channel's DEM profiles at several widths.
 
     python -m granflow.studies.cross_scene --quick [--out DIR] [--report FILE]
     python -m granflow.studies.cross_scene --full [--out DIR] [--report FILE] [--workers N]
+           [--threads T]
            [--channel DIR] [--reanalyse] [--only-report]
 
 This module is the command and the calibration campaign's plans; the

@@ -4,7 +4,8 @@ the report docs/reproduce_000.md.
 
     python -m granflow.studies.reproduce_000 --quick [--out DIR] [--report FILE]
     python -m granflow.studies.reproduce_000 --full | --widths | --paper [--out DIR]
-           [--report FILE] [--workers N | --scheduler ADDRESS] [--reanalyse] [--only-report]
+           [--report FILE] [--workers N [--threads T] | --scheduler ADDRESS] [--reanalyse]
+           [--only-report]
 
 A *point* is one channel run, (W, phi_bar, k_n, seed) at depth B and periodic height H,
 prepared by fill and release (:class:`granflow.scenes.channel.Channel`, ``preparation =

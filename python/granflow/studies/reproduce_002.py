@@ -3,7 +3,7 @@ own cell runs, as resumable pieces, and the report docs/reproduce_002.md.
 
     python -m granflow.studies.reproduce_002 --quick [--out DIR] [--report FILE]
     python -m granflow.studies.reproduce_002 --full | --paper [--out DIR] [--report FILE]
-           [--workers N | --scheduler ADDRESS] [--reanalyse] [--only-report]
+           [--workers N [--threads T] | --scheduler ADDRESS] [--reanalyse] [--only-report]
 
 A *point* is one cell run, (mu_s, N, p_ext, tau/p, seed), run by the cell campaign
 (:mod:`granflow.studies._campaign.cell`: its stints, stop rule and row). Each finished point is

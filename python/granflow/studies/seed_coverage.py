@@ -4,7 +4,7 @@ seeds' steady means against the SEs the runs report.
 
     python -m granflow.studies.seed_coverage --quick [--out DIR] [--report FILE]
     python -m granflow.studies.seed_coverage --full [--out DIR] [--report FILE]
-           [--workers N | --scheduler ADDRESS] [--reanalyse] [--only-report]
+           [--workers N [--threads T] | --scheduler ADDRESS] [--reanalyse] [--only-report]
 
 The points are the cell campaign's (:mod:`granflow.studies._campaign.cell`), one per seed, in
 one stint of ``length`` contact times with no SE target (so that every seed runs the same
