@@ -9,18 +9,21 @@ from pathlib import Path
 
 import numpy as np
 import polars as pl
+import pyarrow as pa
 import pytest
 from granflow.analysis import replicas
 from granflow.analysis import rheology as rh
 from granflow.continuum import LocalLaw
 from granflow.continuum import calibration as acal
 from granflow.continuum import channel_model as cm
+from granflow.continuum.constants import ModelConstants
 from granflow.errors import ParameterError
 from granflow.material import MATERIAL_000
 from granflow.studies import cross_scene as cs
 from granflow.studies import cross_scene_report as csr
 
 CHANNEL = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
+CROSS = Path(__file__).resolve().parents[1] / "docs" / "data" / "cross_scene"
 
 
 def test_the_gradient_frame_is_the_channels_measure():
@@ -197,3 +200,102 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
         assert key in text, key
     figs = sorted((out / "cross_scene_figures").glob("*.png"))
     assert len(figs) == 4 and all(f"cross_scene_figures/{f.name}" in text for f in figs)
+
+
+# ---------------------------------------------------------------------------------------------
+# calibrate once, predict any channel run with the constants held (issue 37, item 4)
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def constants():
+    """The committed calibration's constants with an amplitude given (nothing refitted)."""
+    cal = acal.calibrate(pl.read_parquet(CROSS / "points.parquet"))
+    return cm.constants_of(cal, 0.5, 0.02, "given")
+
+
+def test_constants_save_and_load_the_same_laws_covariances_and_amplitude(constants, tmp_path):
+    f = constants.save(tmp_path / "model.parquet")
+    back = ModelConstants.load(f)
+    assert back.laws == constants.laws
+    assert (back.A, back.A_se, back.A_from) == (0.5, 0.02, "given")
+    for p, (mu_cov, phi_cov) in constants.covariances.items():
+        assert np.array_equal(back.covariances[p][0], mu_cov)
+        assert np.array_equal(back.covariances[p][1], phi_cov)
+    # the bands' draws are the same from the loaded constants
+    p = next(iter(constants.laws))
+    assert back.sample(p, 3, seed=2) == constants.sample(p, 3, seed=2)
+
+
+def test_a_file_that_is_not_a_constants_table_is_refused(tmp_path):
+    pl.DataFrame({"A": [0.5]}).write_parquet(tmp_path / "fits.parquet")
+    with pytest.raises(ParameterError, match="not a model constants table"):
+        ModelConstants.load(tmp_path / "fits.parquet")
+    with pytest.raises(ParameterError, match="invalid path"):
+        ModelConstants.load(tmp_path / "none.parquet")
+    with pytest.raises(ParameterError, match="invalid A = 0"):
+        ModelConstants({1e-4: _LAW}, 0.0)
+
+
+_LAW = LocalLaw(0.36, 0.47, 0.56, 0.59, 0.16, 1.0, 0.03, 0.5, mu_form="jop")
+
+
+def test_predict_channel_holds_the_given_amplitude(constants):
+    case = next(c for c in cm.channel_cases(CHANNEL) if c.W == 60 and c.phi_bar == 0.61)
+    runs = [cm.predict_channel(constants.with_amplitude(a), case, n_band=0,
+                               models=("nonlocal",)) for a in (0.5, 0.25)]
+    for pred, a in zip(runs, (0.5, 0.25), strict=True):
+        row = pred.cases.row(0, named=True)
+        assert row["A"] == a and row["seed"] == case.seed
+        # the whole-channel misfit is the public one of the model's profile
+        prof = cm.solve("nonlocal", constants.law_for(case.pressure())[1], case, a)
+        assert row["nonlocal_u_rel"] == cm.velocity_misfit(case, prof)
+    assert runs[0].cases["nonlocal_u_rel"][0] != runs[1].cases["nonlocal_u_rel"][0]
+
+
+def test_predict_refuses_a_reference_run_the_dataset_does_not_have():
+    cases = cm.channel_cases(CHANNEL)
+    with pytest.raises(ParameterError, match=r"invalid reference = \(100.0, 0.6\).*\(40, 0.6\)"):
+        cm.reference_case(cases, (100.0, 0.6))
+    assert cm.reference_case(cases, (40.0, 0.6)).W == 40
+
+
+def test_channel_cases_leave_out_unconverged_runs_and_say_so(tmp_path):
+    pts = pl.read_parquet(CHANNEL / "points.parquet")
+    pts.with_columns(converged=pl.col("W") != 60).write_parquet(tmp_path / "points.parquet")
+    (tmp_path / "profiles.parquet").write_bytes((CHANNEL / "profiles.parquet").read_bytes())
+    with pytest.warns(UserWarning, match="did not converge and are left out: W = 60"):
+        kept = cm.channel_cases(tmp_path)
+    assert kept and all(c.W != 60 for c in kept)
+    assert len(cm.channel_cases(tmp_path, include_unconverged=True)) == len(
+        cm.channel_cases(CHANNEL))
+
+
+def test_a_channel_dataset_never_analysed_as_steady_is_named(tmp_path):
+    pl.DataFrame({"W": [20.0], "phi_bar": [0.62], "kn": [1e5], "state": ["arrested"]}
+                 ).write_parquet(tmp_path / "points.parquet")
+    pl.DataFrame({"xi": [0.5]}).write_parquet(tmp_path / "profiles.parquet")
+    with pytest.raises(ParameterError,
+                       match=r"no steady run at kn = 100000 \(its states: arrested"):
+        cm.channel_cases(tmp_path)
+
+
+def _run_dir(path: Path, kind: str) -> Path:
+    from granflow import io
+    from test_analysis_channel import W as SYN_W
+    from test_analysis_channel import synthetic_bins, synthetic_series
+
+    path.mkdir()
+    params = {"W": SYN_W, "phi_bar": 0.6, "kn": 1e5}
+    io.write_parquet(synthetic_bins(t_first=0.0)[0], path / "bins.parquet", params, seed=7)
+    io.write_parquet(pa.table(synthetic_series(kind)), path / "series.parquet", params, seed=7)
+    return path
+
+
+def test_one_runs_directory_is_a_case(tmp_path):
+    case = cm.cases_of(_run_dir(tmp_path / "run", "steady"))[0]
+    assert (case.W, case.phi_bar, case.kn, case.seed) == (40.0, 0.6, 1e5, 7)
+    assert {"xi", "u", "gamma_dot", "mu", "phi", "I", "zone"} <= set(case.profile.columns)
+    assert case.profile["xi"].is_sorted() and case.sigma_xx > 0
+    with pytest.raises(ParameterError, match="its flow is accelerating"):
+        cm.run_case(_run_dir(tmp_path / "acc", "accelerating"))
+    with pytest.raises(ParameterError, match="no bins.parquet, series.parquet"):
+        cm.run_case(tmp_path)

@@ -93,9 +93,11 @@ def calibrate(points: pl.DataFrame) -> dict[float, Calibration]:
 
 
 def fits_table(cal: Mapping[float, Calibration]) -> pl.DataFrame:
-    """One row per (pressure, law): constants (named in ``constants``), errors and
-    covariance (row-major, in the constants' order) both scaled by max(1, red chi^2), red
-    chi^2, the I range; the committed ``fits.parquet``."""
+    """One row per (pressure, law): constants c0, c1, c2 (named, in that order, in
+    ``constants``: e.g. mu_s, mu_2, I_0), their errors and covariance (row-major, in the
+    constants' order) both scaled by max(1, red chi^2), red chi^2, the I range; the committed
+    ``fits.parquet``. The models' constants (laws and amplitude) are
+    :class:`granflow.continuum.constants.ModelConstants` (``model.parquet``)."""
     rows = []
     for p, c in cal.items():
         for name, f in (("mu", c.mu_fit), ("phi", c.phi_fit), ("mu (4.2)", c.mu_power)):
@@ -105,8 +107,8 @@ def fits_table(cal: Mapping[float, Calibration]) -> pl.DataFrame:
             e = f.errors_scaled
             rows.append({"p_ext": p, "law": name, "equation": f.equation,
                          "constants": ", ".join(f.params),
-                         "c0": f.params[k0], "c0_se": e[k0], "A": f.params[k1],
-                         "A_se": e[k1], "a": f.params[k2], "a_se": e[k2],
+                         "c0": f.params[k0], "c0_se": e[k0], "c1": f.params[k1],
+                         "c1_se": e[k1], "c2": f.params[k2], "c2_se": e[k2],
                          "red_chi2": f.red_chi2, "n": f.n,
                          "cov": [float(v) for v in f.cov_scaled.ravel()],
                          "I_min": c.law.I_min, "I_max": c.law.I_max})

@@ -30,6 +30,7 @@ from granflow.continuum import (
     solve_nonlocal,
 )
 from granflow.continuum.calibration import Calibration, calibrate
+from granflow.continuum.constants import ModelConstants
 from granflow.errors import GranflowError, ParameterError
 
 #: I below which a profile counts as plug (both the DEM's bins and the models'): the DEM's
@@ -38,6 +39,8 @@ I_PLUG = 1e-4
 #: the width whose DEM profiles fix the nonlocal amplitude A (then held for all others)
 A_WIDTH, A_PHI_BAR = 40.0, 0.60
 ZONES = ("plug", "dense", "loose", "wall")
+#: the continuum models (:func:`solve`)
+MODELS = ("local", "nonlocal")
 
 
 @dataclass
@@ -51,10 +54,18 @@ class ChannelCase:
     profile: pl.DataFrame
     sigma_xx: float
     delta_095: float
+    #: the run's seed (replicas of a point are cases of their own)
+    seed: int | None = None
 
     @property
     def name(self) -> str:
-        return f"W = {self.W:g}, phi_bar = {self.phi_bar:g}"
+        return (f"W = {self.W:g}, phi_bar = {self.phi_bar:g}"
+                + (f", seed {self.seed}" if self.seed is not None else ""))
+
+    @property
+    def key(self) -> tuple[float, float, int | None]:
+        """(W, phi_bar, seed): a case's rows in the prediction's tables."""
+        return self.W, self.phi_bar, self.seed
 
     def problem(self, k: int = 0) -> ChannelProblem:
         """Boundary data at the centre of bin ``k`` (0: the wall bin, whose u is u_slip):
@@ -69,26 +80,106 @@ class ChannelCase:
         return self.sigma_xx / self.kn
 
 
-def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5) -> list[ChannelCase]:
-    """The steady runs at ``kn`` of a reproduce_000 dataset (points and profiles)."""
+#: the points columns a channel dataset needs (a reproduce_000 dataset's)
+CASE_COLUMNS = ("W", "phi_bar", "kn", "parent", "state", "u_slip", "sigma_xx_mean",
+                "delta_095")
+#: the columns that tell a point's profile rows apart (those both tables have)
+PROFILE_KEY = ("W", "phi_bar", "kn", "parent", "B", "H", "seed", "prep")
+
+
+def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
+                  include_unconverged: bool = False) -> list[ChannelCase]:
+    """The steady runs at ``kn`` of a reproduce_000 dataset (points and profiles), one case
+    per run (replicas apart). Runs that did not meet their plan's stop rule (``converged``
+    false) are left out with a warning naming them, unless ``include_unconverged``."""
     d = Path(channel)
+    what = "allowed a reproduce_000 dataset, e.g. docs/data/reproduce_000 of a granflow checkout"
     missing = [f for f in ("points.parquet", "profiles.parquet") if not (d / f).is_file()]
     if missing:
         raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no "
-                             f"{', '.join(missing)} (allowed a reproduce_000 dataset, e.g. "
-                             "docs/data/reproduce_000 of a granflow checkout)")
-    pts = pl.read_parquet(d / "points.parquet").filter(
-        (pl.col("kn") == kn) & pl.col("u_slip").is_not_null())
+                             f"{', '.join(missing)} ({what})")
+    pts = pl.read_parquet(d / "points.parquet")
+    if "u_slip" not in pts.columns:  # (no run of the dataset was ever analysed as steady)
+        states = sorted(set(pts["state"].to_list())) if "state" in pts.columns else []
+        raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no steady run "
+                             f"at kn = {kn:g} (its states: {', '.join(states) or 'none'}; "
+                             f"{what})")
+    lacking = [c for c in CASE_COLUMNS if c not in pts.columns]
+    if lacking:
+        raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: its points "
+                             f"lack the columns {', '.join(lacking)} ({what})")
+    pts = pts.filter((pl.col("kn") == kn) & pl.col("u_slip").is_not_null())
+    if "converged" in pts.columns and not include_unconverged:
+        left = pts.filter(~pl.col("converged"))
+        if left.height:
+            warnings.warn(f"channel_cases: {left.height} steady run(s) of {os.fspath(channel)} "
+                          "did not converge and are left out: "
+                          + "; ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g} "
+                                      f"({r['state']})" for r in left.iter_rows(named=True))
+                          + " (include_unconverged=True takes them)", UserWarning, stacklevel=2)
+        pts = pts.filter(pl.col("converged"))
     prof = pl.read_parquet(d / "profiles.parquet")
+    key = [c for c in PROFILE_KEY if c in pts.columns and c in prof.columns]
     out = []
-    for r in pts.sort("W", "phi_bar").iter_rows(named=True):
-        p = prof.filter((pl.col("W") == r["W"]) & (pl.col("phi_bar") == r["phi_bar"])
-                        & (pl.col("kn") == kn) & (pl.col("parent") == r["parent"])).sort("xi")
+    for r in pts.sort("W", "phi_bar", *(["seed"] if "seed" in key else [])).iter_rows(
+            named=True):
+        p = prof.filter(*(pl.col(c) == r[c] for c in key)).sort("xi")
         out.append(ChannelCase(r["W"], r["phi_bar"], kn, p, r["sigma_xx_mean"],
-                               r["delta_095"]))
+                               r["delta_095"], r.get("seed")))
     if not out:
         raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no steady run "
-                             f"at kn = {kn:g} (allowed a reproduce_000 dataset)")
+                             f"at kn = {kn:g} ({what})")
+    return out
+
+
+def run_case(run: str | os.PathLike[str], n_particles: int | None = None) -> ChannelCase:
+    """One steady channel run of ``granflow run`` (a directory with its ``bins.parquet`` and
+    ``series.parquet``; W, phi_bar, kn and the seed from their metadata) as a case: its half
+    profile and boundary data from granflow.analysis.channel.summary. A run that is not
+    steady (granflow.analysis.channel_profiles.flow_state, the threshold scaled to
+    ``n_particles`` where given) is refused, naming its state."""
+    import pyarrow.parquet as pq
+
+    from granflow.analysis import channel as ach
+    from granflow.analysis.channel_profiles import flow_state
+    from granflow.io import read_params
+
+    d = Path(run)
+    missing = [f for f in ("bins.parquet", "series.parquet") if not (d / f).is_file()]
+    if missing:
+        raise ParameterError(f"invalid channel run {os.fspath(run)!r}: no {', '.join(missing)} "
+                             "(allowed the directory of a channel run of `granflow run`)")
+    params = read_params(d / "bins.parquet")
+    if not {"W", "phi_bar"} <= set(params):
+        raise ParameterError(f"invalid channel run {os.fspath(run)!r}: its parameters are not "
+                             "a channel's (no W, phi_bar)")
+    bins, series = pq.read_table(d / "bins.parquet"), pq.read_table(d / "series.parquet")
+    fs = flow_state(series, n_particles=n_particles)
+    if not fs.is_steady:
+        raise ParameterError(f"invalid channel run {os.fspath(run)!r}: its flow is {fs.state}; "
+                             "allowed a steady (or fluctuating) run")
+    s = ach.summary(bins, series)
+    seed = pq.read_schema(d / "bins.parquet").metadata.get(b"granflow.seed", b"None").decode()
+    return ChannelCase(float(params["W"]), float(params["phi_bar"]),
+                       float(params.get("kn", 1e5)), s["profile"], s["sigma_xx_mean"].value,
+                       s["delta_095"].value, int(seed) if seed.lstrip("-").isdigit() else None)
+
+
+def cases_of(source: str | os.PathLike[str] | ChannelCase | Sequence[ChannelCase],
+             kn: float = 1e5) -> list[ChannelCase]:
+    """The cases a prediction takes from ``source``: a reproduce_000 dataset
+    (:func:`channel_cases`), one run's directory (:func:`run_case`), or cases."""
+    if isinstance(source, ChannelCase):
+        return [source]
+    if isinstance(source, (str, os.PathLike)):
+        d = Path(source)
+        if (d / "bins.parquet").is_file() and not (d / "points.parquet").is_file():
+            return [run_case(d)]
+        return channel_cases(d, kn)
+    out = list(source)
+    if not out or not all(isinstance(c, ChannelCase) for c in out):
+        raise ParameterError(f"invalid source = {source!r}: allowed a reproduce_000 dataset, "
+                             "a channel run's directory, or ChannelCase objects")
     return out
 
 
@@ -98,13 +189,17 @@ def law_for(case: ChannelCase, cal: Mapping[float, Calibration]) -> Calibration:
 
 
 def solve(model: str, law: LocalLaw, case: ChannelCase, A: float) -> Profile:
+    """The ``model`` ("local" or "nonlocal", amplitude ``A``) of ``case`` with ``law``, its
+    boundary data from the wall bin."""
+    if model not in MODELS:
+        raise ParameterError(f"invalid model = {model!r}: allowed one of {MODELS}")
     return (solve_local(law, case.problem()) if model == "local"
             else solve_nonlocal(law, A, case.problem()))
 
 
-def _velocity_misfit(case: ChannelCase, prof: Profile, k: int = 0) -> float:
-    """RMS of (u_model - u_DEM)/(u_max - u_slip) over the DEM's bins past bin ``k`` (the
-    boundary data's)."""
+def velocity_misfit(case: ChannelCase, prof: Profile, k: int = 0) -> float:
+    """The whole-channel misfit of a model profile: the RMS of (u_model - u_DEM)/(u_max -
+    u_slip) over the DEM's bins past bin ``k`` (the boundary data's)."""
     t = case.profile
     xi, u = t["xi"].to_numpy(), t["u"].to_numpy()
     um = prof.at(xi[k + 1:])["u"]
@@ -119,7 +214,7 @@ def fit_amplitude(law: LocalLaw, case: ChannelCase, k: int = 0) -> float:
 
     def cost(la: float) -> float:
         try:
-            return _velocity_misfit(case, solve_nonlocal(law, 10**la, case.problem(k)), k)
+            return velocity_misfit(case, solve_nonlocal(law, 10**la, case.problem(k)), k)
         except GranflowError:
             return 1e3
 
@@ -171,36 +266,130 @@ BOUNDARY_BINS = (0, 1, 2)  # (0 first: the report's A and own amplitudes are its
 
 
 def boundary_sensitivity(cal: Mapping[float, Calibration], cases: Sequence[ChannelCase],
-                         ref: ChannelCase, bins: Sequence[int] = BOUNDARY_BINS) -> pl.DataFrame:
+                         ref: ChannelCase | None, bins: Sequence[int] = BOUNDARY_BINS,
+                         A: float | None = None) -> pl.DataFrame:
     """For each boundary bin k: every run's own best A and its misfit, and the misfit with
     the A fitted on ``ref`` held (misfits over the bins past k, relative to the DEM's
     u_max - u_slip). Does the amplitude become a material constant when the boundary data
-    are taken outside the layered wall zone?"""
+    are taken outside the layered wall zone? With ``A`` given (no ``ref``), that A is held
+    at bin 0 and nothing is held at the others."""
     rows = []
     for k in bins:
-        a_ref = fit_amplitude(law_for(ref, cal).law, ref, k)
+        a_ref = (fit_amplitude(law_for(ref, cal).law, ref, k) if ref is not None
+                 else (A if A is not None and k == 0 else math.nan))
         for case in cases:
             law = law_for(case, cal).law
             a = fit_amplitude(law, case, k)
             rows.append({
                 "bin": k, "x0": float(case.profile["xi"][k]), "W": case.W,
-                "phi_bar": case.phi_bar, "A_best": a, "A_ref": a_ref,
-                "u_rel_best": _velocity_misfit(case, solve_nonlocal(law, a, case.problem(k)), k),
-                "u_rel_held": _velocity_misfit(
-                    case, solve_nonlocal(law, a_ref, case.problem(k)), k)})
+                "phi_bar": case.phi_bar, "seed": case.seed, "A_best": a, "A_ref": a_ref,
+                "u_rel_best": velocity_misfit(case, solve_nonlocal(law, a, case.problem(k)), k),
+                "u_rel_held": (velocity_misfit(case, solve_nonlocal(law, a_ref,
+                                                                    case.problem(k)), k)
+                               if math.isfinite(a_ref) else math.nan)})
     return pl.DataFrame(rows)
 
 
 @dataclass
-class Prediction:
-    """Everything the report shows: the calibrations, the amplitude fitted on one width, per
-    channel run the summary (``cases``), the per-zone misfits (``zones``), the model
+class ChannelPrediction:
+    """The models against channel runs (:func:`predict_channel`): per run the summary
+    (``cases``: the DEM's u_max - u_slip, plug, delta_0.95 and mass against each model's, and
+    the whole-channel misfit ``<model>_u_rel``), the per-zone misfits (``zones``), the model
     profiles at the DEM's bins with the calibration bands (``profiles``) and the DEM's bins
-    against the local law (``residuals``); the solve time."""
+    against the local law (``residuals``)."""
+
+    constants: ModelConstants
+    cases: pl.DataFrame
+    zones: pl.DataFrame
+    profiles: pl.DataFrame
+    residuals: pl.DataFrame
+
+
+def _band(case: ChannelCase, laws: Sequence[LocalLaw], model: str, A: float,
+          xi: FloatArray) -> tuple[dict[str, FloatArray], int]:
+    """16th and 84th percentiles of u - u_wall, du/dx and phi over ``laws`` at ``xi``
+    (continuum.prediction_band), and how many laws failed to solve; NaN without laws."""
+    if not laws:
+        nan = np.full(xi.shape, math.nan)
+        return {f"{n}_{e}": nan for n in ("du", "dudx", "phi") for e in ("lo", "hi")}, 0
+    band = prediction_band(laws, lambda law, prob: solve(model, law, case, A), case.problem(),
+                           quantiles=(0.16, 0.84), x=xi)
+    out = {}
+    for key, name in (("u", "du"), ("dudx", "dudx"), ("phi", "phi")):
+        out[f"{name}_lo"], out[f"{name}_hi"] = band[key][0], band[key][1]
+    return out, int(band["failed"])
+
+
+def predict_channel(constants: ModelConstants,
+                    source: str | os.PathLike[str] | ChannelCase | Sequence[ChannelCase],
+                    n_band: int = 24, models: Sequence[str] = MODELS,
+                    log: Any = None) -> ChannelPrediction:
+    """Predict channel runs with constants fitted once and held (nothing is refitted): every
+    steady run of a reproduce_000 dataset, one run's directory of ``granflow run``, or
+    :class:`ChannelCase` objects (:func:`cases_of`), with each of ``models``, and bands from
+    ``n_band`` laws drawn from the constants' covariances (none without them, or with
+    ``n_band = 0``). ``log``: a callable for one line per run (None: quiet).
+
+        constants = ModelConstants.load("docs/data/cross_scene/model.parquet")
+        pred = predict_channel(constants, "runs/my_channel")
+        pred.cases["nonlocal_u_rel"]
+    """
+    bad_models = [m for m in models if m not in MODELS]
+    if bad_models or not models:
+        raise ParameterError(f"invalid models = {list(models)!r}: allowed a non-empty subset of "
+                             f"{MODELS}")
+    if int(n_band) != n_band or n_band < 0:
+        raise ParameterError(f"invalid n_band = {n_band!r}: allowed an integer >= 0")
+    A = constants.A
+    rows, zrows, prows, res = [], [], [], []
+    for case in cases_of(source):
+        p_cal, law = constants.law_for(case.pressure())
+        t = case.profile
+        xi = t["xi"].to_numpy()
+        laws = constants.sample(p_cal, n_band, seed=2) if n_band else []
+        row: dict[str, Any] = {
+            "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed, "p_cal": p_cal,
+            "sigma_xx_d_kn": case.pressure(), "mu_wall": float(t["mu"][0]), "A": A,
+            "dem_du": float(t["u"][-1] - t["u"][0]),
+            "dem_plug": plug_half_width(xi, t["I"].to_numpy(), I_PLUG),
+            "dem_delta_095": case.delta_095,
+            "dem_mass": float(case.phi_bar * case.W / 2)}
+        for model in models:
+            prof = solve(model, law, case, A)
+            m = prof.at(xi)
+            band, failed = _band(case, laws, model, A, xi)
+            row.update({f"{model}_du": float(m["u"][-1] - m["u"][0]),
+                        f"{model}_plug": plug_half_width(xi, m["I"], I_PLUG),
+                        # (a local plug that only slides has no delta_0.95)
+                        f"{model}_delta_095": (delta_095_profile(xi, m)
+                                               if m["u"][-1] > m["u"][0] else math.nan),
+                        f"{model}_mass": prof.mass() + float(xi[0] * t["phi"][0]),
+                        f"{model}_u_rel": velocity_misfit(case, prof),
+                        f"{model}_band_failed": failed})
+            zrows += [{**z, "seed": case.seed} for z in zone_misfits(case, prof, model)]
+            prows.append(pl.DataFrame({
+                "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed, "model": model,
+                "xi": xi, "du": m["u"] - m["u"][0], "dudx": m["dudx"], "phi": m["phi"],
+                "I": m["I"], **band}))
+        rows.append(row)
+        res.append(local_law_residuals(case, law))
+        if log is not None:
+            log(f"  {case.name}: " + ", ".join(f"{m} u_rel {row[f'{m}_u_rel']:.3f}"
+                                               for m in models))
+    return ChannelPrediction(constants, pl.DataFrame(rows), pl.DataFrame(zrows),
+                             pl.concat(prows), pl.concat(res))
+
+
+@dataclass
+class Prediction:
+    """Everything the report shows: the calibrations, the constants (the amplitude fitted on
+    one run, or given), per channel run the summary (``cases``, with each run's own best A),
+    the per-zone misfits (``zones``), the model profiles at the DEM's bins with the
+    calibration bands (``profiles``), the DEM's bins against the local law (``residuals``) and
+    the boundary-bin sensitivity (``boundary``); the solve time."""
 
     cal: dict[float, Calibration]
-    A: float
-    A_se: float
+    constants: ModelConstants
     cases: pl.DataFrame
     zones: pl.DataFrame
     profiles: pl.DataFrame
@@ -210,83 +399,81 @@ class Prediction:
     #: nonlocal solves that reached only a relaxed tolerance (solve_nonlocal's warning)
     relaxed: int = 0
 
+    @property
+    def A(self) -> float:
+        return self.constants.A
 
-def _band(case: ChannelCase, laws: Sequence[LocalLaw], model: str, A: float,
-          xi: FloatArray) -> tuple[dict[str, FloatArray], int]:
-    """16th and 84th percentiles of u - u_wall, du/dx and phi over ``laws`` at ``xi``
-    (continuum.prediction_band), and how many laws failed to solve."""
-    band = prediction_band(laws, lambda law, prob: solve(model, law, case, A), case.problem(),
-                           quantiles=(0.16, 0.84), x=xi)
-    out = {}
-    for key, name in (("u", "du"), ("dudx", "dudx"), ("phi", "phi")):
-        out[f"{name}_lo"], out[f"{name}_hi"] = band[key][0], band[key][1]
-    return out, int(band["failed"])
+    @property
+    def A_se(self) -> float:
+        return self.constants.A_se
+
+
+def constants_of(cal: Mapping[float, Calibration], A: float, A_se: float = math.nan,
+                 A_from: str = "") -> ModelConstants:
+    """The constants of calibrations ``cal`` with the amplitude ``A``."""
+    return ModelConstants({p: c.law for p, c in cal.items()}, A, A_se, A_from,
+                          {p: c.covariances() for p, c in cal.items()})
+
+
+def reference_case(cases: Sequence[ChannelCase], reference: tuple[float, float]
+                   ) -> ChannelCase:
+    """The run of ``cases`` at ``reference`` = (W, phi_bar) to fit the amplitude on (the
+    first seed); refused, naming the runs there are, where there is none."""
+    at = [c for c in cases if (c.W, c.phi_bar) == tuple(reference)]
+    if not at:
+        have = sorted({(c.W, c.phi_bar) for c in cases})
+        raise ParameterError(
+            f"invalid reference = {tuple(reference)!r}: no steady run at W = {reference[0]:g}, "
+            f"phi_bar = {reference[1]:g} to fit the amplitude on; allowed one of "
+            f"{', '.join(f'({w:g}, {p:g})' for w, p in have)}, or a given A")
+    return at[0]
 
 
 def predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int = 24,
-            log: Any = print) -> Prediction:
-    """Calibrate, fit A on the (A_WIDTH, A_PHI_BAR) run (its SE: the spread of A refitted
-    for ``n_band // 3`` laws drawn from the calibration), and predict every steady run of
-    ``channel`` with the local and the nonlocal model (A held), with bands from ``n_band``
-    drawn laws."""
+            log: Any = print, A: float | None = None, A_se: float = math.nan,
+            reference: tuple[float, float] = (A_WIDTH, A_PHI_BAR)) -> Prediction:
+    """Calibrate on the cell runs ``points``; fit the amplitude A on the run of ``channel`` at
+    ``reference`` (W, phi_bar) (its SE: the spread of A refitted for ``n_band // 3`` laws
+    drawn from the calibration), or hold a given ``A`` (with ``A_se``); predict every steady
+    run of ``channel`` with the local and the nonlocal model (:func:`predict_channel`, bands
+    from ``n_band`` drawn laws), each run's own best A beside it."""
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
-        pred = _predict(points, channel, n_band, log)
+        pred = _predict(points, channel, n_band, log, A, A_se, reference)
     pred.relaxed = sum("not reached" in str(w.message) for w in caught)
     return pred
 
 
-def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
-             log: Any) -> Prediction:
+def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int, log: Any,
+             A: float | None, A_se: float, reference: tuple[float, float]) -> Prediction:
     t0 = time.perf_counter()
     cal = calibrate(points)
     cases = channel_cases(channel)
-    ref = min(cases, key=lambda c: (abs(c.W - A_WIDTH), abs(c.phi_bar - A_PHI_BAR)))
-    c_ref = law_for(ref, cal)
-    # the amplitudes with the wall bin's data (bin 0): A on ref, and each run's own
-    boundary = boundary_sensitivity(cal, cases, ref)
-    own = {(r["W"], r["phi_bar"]): r for r in boundary.filter(pl.col("bin") == 0)
-           .iter_rows(named=True)}
-    A = float(boundary.filter(pl.col("bin") == 0)["A_ref"][0])
-    a_draws = [fit_amplitude(law, ref) for law in c_ref.sample(max(3, n_band // 3), seed=1)]
-    A_se = float(np.std(a_draws, ddof=1))
-    log(f"nonlocal amplitude A = {A:.4g} ± {A_se:.2g} (fitted on {ref.name})")
-    rows, zrows, prows, res = [], [], [], []
-    for case in cases:
-        c = law_for(case, cal)
-        t = case.profile
-        xi = t["xi"].to_numpy()
-        laws = c.sample(n_band, seed=2)
-        a_best = float(own[(case.W, case.phi_bar)]["A_best"])
-        row: dict[str, Any] = {
-            "W": case.W, "phi_bar": case.phi_bar, "p_cal": c.p_ext,
-            "sigma_xx_d_kn": case.pressure(), "mu_wall": float(t["mu"][0]),
-            "A_best": a_best, "dem_du": float(t["u"][-1] - t["u"][0]),
-            "dem_plug": plug_half_width(xi, t["I"].to_numpy(), I_PLUG),
-            "dem_delta_095": case.delta_095,
-            "dem_mass": float(case.phi_bar * case.W / 2)}
-        for model in ("local", "nonlocal"):
-            prof = solve(model, c.law, case, A)
-            m = prof.at(xi)
-            band, failed = _band(case, laws, model, A, xi)
-            row.update({f"{model}_du": float(m["u"][-1] - m["u"][0]),
-                        f"{model}_plug": plug_half_width(xi, m["I"], I_PLUG),
-                        # (a local plug that only slides has no delta_0.95)
-                        f"{model}_delta_095": (delta_095_profile(xi, m)
-                                               if m["u"][-1] > m["u"][0] else math.nan),
-                        f"{model}_mass": prof.mass() + float(xi[0] * t["phi"][0]),
-                        f"{model}_u_rel": _velocity_misfit(case, prof),
-                        f"{model}_band_failed": failed})
-            zrows += zone_misfits(case, prof, model)
-            prows.append(pl.DataFrame({
-                "W": case.W, "phi_bar": case.phi_bar, "model": model, "xi": xi,
-                "du": m["u"] - m["u"][0], "dudx": m["dudx"], "phi": m["phi"], "I": m["I"],
-                **band}))
-        row["nonlocal_best_u_rel"] = float(own[(case.W, case.phi_bar)]["u_rel_best"])
-        rows.append(row)
-        res.append(local_law_residuals(case, c.law))
-        log(f"  {case.name}: local u_rel {row['local_u_rel']:.3f}, nonlocal "
-            f"{row['nonlocal_u_rel']:.3f} (own best A = {a_best:.3g}: "
-            f"{row['nonlocal_best_u_rel']:.3f})")
-    return Prediction(cal, A, A_se, pl.DataFrame(rows), pl.DataFrame(zrows),
-                      pl.concat(prows), pl.concat(res), boundary, time.perf_counter() - t0)
+    if A is None:
+        ref: ChannelCase | None = reference_case(cases, reference)
+        assert ref is not None
+        c_ref = law_for(ref, cal)
+        # the amplitudes with the wall bin's data (bin 0): A on ref, and each run's own
+        boundary = boundary_sensitivity(cal, cases, ref)
+        A = float(boundary.filter(pl.col("bin") == 0)["A_ref"][0])
+        a_draws = [fit_amplitude(law, ref) for law in c_ref.sample(max(3, n_band // 3),
+                                                                   seed=1)]
+        constants = constants_of(cal, A, float(np.std(a_draws, ddof=1)), ref.name)
+        log(f"nonlocal amplitude A = {A:.4g} ± {constants.A_se:.2g} (fitted on {ref.name})")
+    else:
+        boundary = boundary_sensitivity(cal, cases, None, A=A)
+        constants = constants_of(cal, A, A_se, "given")
+        log(f"nonlocal amplitude A = {A:.4g} (given, held)")
+    pc = predict_channel(constants, cases, n_band=n_band)
+    own = {(r["W"], r["phi_bar"], r["seed"]): (r["A_best"], r["u_rel_best"])
+           for r in boundary.filter(pl.col("bin") == 0).iter_rows(named=True)}
+    keys = list(zip(pc.cases["W"], pc.cases["phi_bar"], pc.cases["seed"], strict=True))
+    cases_tab = pc.cases.with_columns(
+        pl.Series("A_best", [own[k][0] for k in keys], dtype=pl.Float64),
+        pl.Series("nonlocal_best_u_rel", [own[k][1] for k in keys], dtype=pl.Float64))
+    for r in cases_tab.iter_rows(named=True):
+        log(f"  W = {r['W']:g}, phi_bar = {r['phi_bar']:g}: local u_rel {r['local_u_rel']:.3f}"
+            f", nonlocal {r['nonlocal_u_rel']:.3f} (own best A = {r['A_best']:.3g}: "
+            f"{r['nonlocal_best_u_rel']:.3f})")
+    return Prediction(cal, constants, cases_tab, pc.zones, pc.profiles, pc.residuals, boundary,
+                      time.perf_counter() - t0)
