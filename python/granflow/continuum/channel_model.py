@@ -62,11 +62,6 @@ class ChannelCase:
         return (f"W = {self.W:g}, phi_bar = {self.phi_bar:g}"
                 + (f", seed {self.seed}" if self.seed is not None else ""))
 
-    @property
-    def key(self) -> tuple[float, float, int | None]:
-        """(W, phi_bar, seed): a case's rows in the prediction's tables."""
-        return self.W, self.phi_bar, self.seed
-
     def problem(self, k: int = 0) -> ChannelProblem:
         """Boundary data at the centre of bin ``k`` (0: the wall bin, whose u is u_slip):
         u there and the fluidity |du/dx|/mu of that bin; sigma_xx the run's mean (uniform
@@ -134,10 +129,10 @@ def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
 
 def run_case(run: str | os.PathLike[str], n_particles: int | None = None) -> ChannelCase:
     """One steady channel run of ``granflow run`` (a directory with its ``bins.parquet`` and
-    ``series.parquet``; W, phi_bar, kn and the seed from their metadata) as a case: its half
-    profile and boundary data from granflow.analysis.channel.summary. A run that is not
-    steady (granflow.analysis.channel_profiles.flow_state, the threshold scaled to
-    ``n_particles`` where given) is refused, naming its state."""
+    ``series.parquet``; W, phi_bar, kn, the particle count and the seed from their metadata)
+    as a case: its half profile and boundary data from granflow.analysis.channel.summary. A
+    run that is not steady (granflow.analysis.channel_profiles.flow_state, the threshold
+    scaled to ``n_particles``, by default the run's count) is refused, naming its state."""
     import pyarrow.parquet as pq
 
     from granflow.analysis import channel as ach
@@ -150,9 +145,11 @@ def run_case(run: str | os.PathLike[str], n_particles: int | None = None) -> Cha
         raise ParameterError(f"invalid channel run {os.fspath(run)!r}: no {', '.join(missing)} "
                              "(allowed the directory of a channel run of `granflow run`)")
     params = read_params(d / "bins.parquet")
-    if not {"W", "phi_bar"} <= set(params):
+    if not {"W", "phi_bar", "kn"} <= set(params):
         raise ParameterError(f"invalid channel run {os.fspath(run)!r}: its parameters are not "
-                             "a channel's (no W, phi_bar)")
+                             "a channel's (no W, phi_bar, kn)")
+    if n_particles is None and isinstance(params.get("n"), int):
+        n_particles = params["n"]
     bins, series = pq.read_table(d / "bins.parquet"), pq.read_table(d / "series.parquet")
     fs = flow_state(series, n_particles=n_particles)
     if not fs.is_steady:
@@ -161,7 +158,7 @@ def run_case(run: str | os.PathLike[str], n_particles: int | None = None) -> Cha
     s = ach.summary(bins, series)
     seed = pq.read_schema(d / "bins.parquet").metadata.get(b"granflow.seed", b"None").decode()
     return ChannelCase(float(params["W"]), float(params["phi_bar"]),
-                       float(params.get("kn", 1e5)), s["profile"], s["sigma_xx_mean"].value,
+                       float(params["kn"]), s["profile"], s["sigma_xx_mean"].value,
                        s["delta_095"].value, int(seed) if seed.lstrip("-").isdigit() else None)
 
 
