@@ -297,3 +297,46 @@ def test_the_depth_check_is_its_own_table_and_stays_out_of_the_width_analyses():
     z = tab["u_slip vs B = 10 (SEs)"].to_list()
     assert z[0] is None and abs(z[1]) < 1e-9 and z[2] > 20
     assert not depth_table(values).height  # one depth: no check
+
+
+def _row(lines: list[str], w: str) -> list[float]:
+    row = next(ln for ln in "\n".join(lines).splitlines()
+               if ln.startswith(f"| {w} | 1e+05 | 10 |"))
+    return [float(c) for c in row.strip("|").split("|")[3:]]
+
+
+def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_path):
+    from granflow.studies.reproduce_000_report import remaining
+
+    plan = rp.widths_plan()
+    fresh = remaining(tmp_path, plan, 4e6)
+    n = len(plan.points) + len(plan.branches)
+    assert f"{n} runs of the widths plan, at 4e+06 particle-steps" in "\n".join(fresh)
+    runs, least, cap, longest = _row(fresh, "150")
+    assert runs == 3 and 0 < least < cap and longest < cap
+    # each W = 150 run is 33,770 spheres (phi_bar 0.60) for t >= 1000 at dt 3.79e-4
+    w150 = next(p for p in plan.points if p.W == 150 and p.phi_bar == 0.60)
+    assert least == pytest.approx(1.8 / 0.6 * 33770 * 1000 / w150.dt / 4e6 / 3600, rel=0.02)
+    # the phi_bar = 0.60 run has reached t = 1000: its least is done, its cap shorter
+    (tmp_path / "work" / w150.key).mkdir(parents=True)
+    pl.DataFrame({"t": [0.0, 1000.0]}).write_parquet(tmp_path / "work" / w150.key /
+                                                     "series.parquet")
+    runs2, least2, cap2, _ = _row(remaining(tmp_path, plan, 4e6), "150")
+    assert runs2 == 3
+    assert least2 == pytest.approx(least * (0.59 + 0.61) / 1.8, abs=0.1)
+    assert cap - cap2 == pytest.approx(least - least2, abs=0.15)
+    assert remaining(tmp_path, rp.Plan("none", ()), 4e6) == []
+
+
+def test_the_committed_pour_dataset_resumes_though_its_rows_predate_point_prep():
+    from pathlib import Path
+
+    from granflow.studies._campaign import done_keys
+
+    d = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
+    assert "prep" not in pl.read_parquet(d / "points.parquet").columns
+    plan = rp.full_plan()
+    keys = done_keys(d, rp.Point)
+    # its runs are the full plan's pour points (prep's default), not new ones to run again
+    assert keys and keys <= {p.key for p in (*plan.points, *plan.branches, *plan.later)}
+    assert not any("_rain" in k for k in keys)

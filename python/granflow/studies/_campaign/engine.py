@@ -51,8 +51,10 @@ def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False,
 
 
 def point_of(cls: type, row: Mapping[str, Any]) -> Any:
-    """The point (dataclass ``cls``) a row of ``points.parquet`` was run for."""
-    return cls(**{f.name: row[f.name] for f in dataclasses.fields(cls)})
+    """The point (dataclass ``cls``) a row of ``points.parquet`` was run for; a field the row
+    lacks (a dataset written before the field was added) takes the field's default, which
+    must then be what those runs used."""
+    return cls(**{f.name: row[f.name] for f in dataclasses.fields(cls) if f.name in row})
 
 
 def done_keys(out: Path, cls: type) -> set[str]:
