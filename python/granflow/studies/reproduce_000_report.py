@@ -904,6 +904,66 @@ def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
     return lines
 
 
+#: the channel's throughput (particle-steps per core-second) where a dataset has no finished
+#: point to measure it on: the widths plan's W = 150, phi_bar = 0.60 point at t = 250-300
+#: (one thread, beside one other one-thread run; benchmarks/NOTES.md, 2026-11-27)
+UNMEASURED_RATE = 4.15e6
+
+
+def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
+    """The plan's runs not yet in ``out``, per (W, k_n, B): how many, and their core-hours at
+    ``rate`` (UNMEASURED_RATE where None) from the least each must run (t_min, or the
+    minimum average) to its cap (t_max), less what a started run has done (its series in
+    ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
+    the plan is done."""
+    from granflow.sizes import CHANNEL_MIX
+    from granflow.studies.reproduce_000 import Point
+
+    from ._campaign import done_keys
+
+    done = done_keys(out, Point)
+    left = [p for p in (*plan.points, *plan.branches, *plan.later) if p.key not in done]
+    if not left:
+        return []
+    r = UNMEASURED_RATE if rate is None else rate
+    rows: dict[tuple[float, float, float], dict[str, Any]] = {}
+    for p in left:
+        t_cap, t_avg = plan.limits(p)
+        series = out / "work" / p.key / "series.parquet"
+        t_done = (float(pl.read_parquet(series, columns=["t"])["t"].max())  # type: ignore[arg-type]
+                  if series.exists() and not p.parent else 0.0)
+        per_t = p.W * p.H * p.B * p.phi_bar / CHANNEL_MIX.mean_volume / p.dt / r / 3600
+        row = rows.setdefault((p.W, p.kn, p.B), {"W": p.W, "k_n": p.kn, "B": p.B, "runs": 0,
+                                                 "core-hours (least)": 0.0,
+                                                 "core-hours (cap)": 0.0,
+                                                 "longest run (h, 1 core)": 0.0})
+        row["runs"] += 1
+        row["core-hours (least)"] += per_t * max(plan.t_min_of(p), t_avg, t_done) - per_t * t_done
+        row["core-hours (cap)"] += per_t * (t_cap - t_done)
+        row["longest run (h, 1 core)"] = max(row["longest run (h, 1 core)"],
+                                             per_t * (t_cap - t_done))
+    tab = pl.DataFrame(sorted(rows.values(), key=lambda d: (-d["W"], d["k_n"], d["B"])))
+    lo, hi = float(tab["core-hours (least)"].sum()), float(tab["core-hours (cap)"].sum())
+    longest = float(tab["longest run (h, 1 core)"].max())  # type: ignore[arg-type]
+    return ["## Not yet run", "",
+            f"{len(left)} runs of the {plan.name} plan, at "
+            + (f"{r:.3g} particle-steps per core-second (measured on this dataset)"
+               if rate is not None else
+               f"{r:.3g} particle-steps per core-second (no finished point here yet: "
+               "the W = 150 run's stints, benchmarks/NOTES.md)")
+            + ": each from the least it must run (a branch its minimum average; the others "
+            f"t_min or the minimum average) to its cap (t = {plan.t_max:g}), less what a "
+            "started run has done:", "",
+            md_table(tab, {"W": ".0f", "k_n": ".0e", "B": ".0f", "core-hours (least)": ".1f",
+                           "core-hours (cap)": ".1f", "longest run (h, 1 core)": ".1f"}), "",
+            f"About {lo:.0f}-{hi:.0f} core-hours: {lo / 6:.0f}-{hi / 6:.0f} sessions of 3 h "
+            "on this 2-core machine. On a cluster each point is one task of one "
+            f"thread (it checkpoints every stint and resumes from there); the longest takes "
+            f"{longest:.0f} h on one core, so the jobs' walltime below:", "",
+            *dask_recipe("granflow.studies.reproduce_000", f"{out}",
+                         f"{math.ceil(1.25 * longest):d}:00:00", plan.name)]
+
+
 def _cost_section(points: pl.DataFrame, paper: Any) -> list[str]:
     # (per W: points, particles, preparation and run wall time, core-hours; the throughput
     # of the runs only)
@@ -1227,7 +1287,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
         path.write_text(f"# Reproducing 000 ({plan.name} campaign)\n\nNo finished point yet "
                         f"in {out}: {n} planned. Run `python -m granflow.studies.reproduce_000 "
                         f"--{plan.name} --out {out} --report {path}`; it resumes from what is "
-                        "there.\n")
+                        "there.\n\n" + "\n".join(remaining(out, plan, None)))
         return path
     se = _read(out, "se_vs_time")
     # the 10-block rule, applied to the dataset as the analysis now applies it
@@ -1259,8 +1319,11 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
         figs += f
     lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(path.parent)})"
                                    for p in figs] + [""]
+    rate = None
     if points.height and points["steps"].sum():
         lines += _cost_section(points, paper)
+        rate = cost(points, ["W"], "n", "steps", prep="prep_seconds")[1]
+    lines += remaining(out, plan, rate)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path

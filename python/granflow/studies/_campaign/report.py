@@ -39,12 +39,13 @@ def pm(v: float, e: float, digits: int = 3) -> str:
     return f"{v:.{digits}f} ± {e:.{digits}f}" if math.isfinite(e) else f"{v:.{digits}f}"
 
 
-def dask_recipe(module: str, out: str, walltime: str) -> list[str]:
-    """A report's lines on running a paper-scale campaign with Dask (markdown)."""
+def dask_recipe(module: str, out: str, walltime: str, mode: str = "paper") -> list[str]:
+    """A report's lines on running a campaign (``--mode``, the paper-scale one by default)
+    with Dask (markdown)."""
     return ["Run it with Dask (each point one task, one thread; resumable as here):", "",
             "```bash",
             "# local pool (default), or any Dask scheduler:",
-            f"python -m {module} --paper --out {out} \\",
+            f"python -m {module} --{mode} --out {out} \\",
             "    --scheduler tcp://scheduler:8786",
             "# on a batch system, a dask-jobqueue cluster gives that address:",
             "python -c 'from dask_jobqueue import SLURMCluster; c = SLURMCluster(cores=32, "
