@@ -34,9 +34,13 @@ COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}
 
 
 def plot_width(pred: Prediction, W: float, phi_bar: float, dem: pl.DataFrame,
-               path: Path) -> Path:
-    """u - u_slip, |du/dx| (log) and phi across the half channel: the DEM with its SE bars,
-    the local and the nonlocal prediction with their calibration bands (16-84 %)."""
+               path: Path, seed: int | None = None) -> Path:
+    """u - u_slip, |du/dx| (log) and phi across the half channel of one run (``seed`` among
+    the replicas of (W, phi_bar)): the DEM with its SE bars, the local and the nonlocal
+    prediction with their calibration bands (16-84 %)."""
+    run = (pl.col("W") == W) & (pl.col("phi_bar") == phi_bar)
+    if seed is not None:
+        run = run & (pl.col("seed") == seed)
     fig = Figure(figsize=(15, 4.2))
     axes = fig.subplots(1, 3)
     xi = dem["xi"].to_numpy()
@@ -48,8 +52,7 @@ def plot_width(pred: Prediction, W: float, phi_bar: float, dem: pl.DataFrame,
         ax.errorbar(xi, y, yerr=2 * dem[f"{dcol}_se"].to_numpy(), fmt="ko", ms=3,
                     capsize=2, label="DEM (2 SE)")
         for model in MODELS:
-            m = pred.profiles.filter((pl.col("W") == W) & (pl.col("phi_bar") == phi_bar)
-                                     & (pl.col("model") == model)).sort("xi")
+            m = pred.profiles.filter(run & (pl.col("model") == model)).sort("xi")
             x = m["xi"].to_numpy()
             ax.plot(x, m[mcol].to_numpy(), color=COLOURS[model], label=model)
             ax.fill_between(x, m[f"{mcol}_lo"].to_numpy(), m[f"{mcol}_hi"].to_numpy(),
@@ -59,7 +62,7 @@ def plot_width(pred: Prediction, W: float, phi_bar: float, dem: pl.DataFrame,
         if mcol == "dudx":
             ax.set_yscale("log")
             ax.set_ylim(bottom=1e-6)
-    row = pred.cases.filter((pl.col("W") == W) & (pl.col("phi_bar") == phi_bar)).row(0, named=True)
+    row = pred.cases.filter(run).row(0, named=True)
     for key, colour, name in (("dem", "k", "DEM"), ("local", COLOURS["local"], "local"),
                               ("nonlocal", COLOURS["nonlocal"], "nonlocal")):
         for ax in axes:
@@ -69,8 +72,12 @@ def plot_width(pred: Prediction, W: float, phi_bar: float, dem: pl.DataFrame,
             ax.axvline(W / 2 - row[f"{key}_plug"], color=colour, ls=":", lw=0.8,
                        label=f"plug edge, {name}" if ax is axes[0] else None)
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"W = {W:g} d, phi_bar = {phi_bar:g}: DEM against the cell-calibrated models "
-                 f"(A = {pred.A:.3g} fitted at W = {A_WIDTH:g})")
+    fig.suptitle(f"W = {W:g} d, phi_bar = {phi_bar:g}"
+                 + (f", seed {seed}" if seed is not None else "")
+                 + ": DEM against the cell-calibrated models "
+                 + (f"(A = {pred.A:.3g} fitted on {pred.constants.A_from})"
+                    if pred.constants.A_from not in ("", "given") else
+                    f"(A = {pred.A:.3g}, given)"))
     return save_figure(fig, path)
 
 
@@ -304,10 +311,13 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     rel = path.parent
     figs = [plot_law(pred, figdir / "law.png")]
     phis = sorted(set(pred.cases["phi_bar"].to_list()))
+    drawn: set[float] = set()
     for case in channel_cases(channel):
-        if case.phi_bar == (A_PHI_BAR if A_PHI_BAR in phis else phis[0]):
+        # one figure per width (its first replica) at the reference phi_bar
+        if case.phi_bar == (A_PHI_BAR if A_PHI_BAR in phis else phis[0]) and case.W not in drawn:
+            drawn.add(case.W)
             figs.append(plot_width(pred, case.W, case.phi_bar, case.profile,
-                                   figdir / f"W{case.W:g}_phi{case.phi_bar:g}.png"))
+                                   figdir / f"W{case.W:g}_phi{case.phi_bar:g}.png", case.seed))
     se = (pl.read_parquet(out / "se_vs_time.parquet")
           if (out / "se_vs_time.parquet").exists() else pl.DataFrame())
     wall = float(points["wall_seconds"].sum())
