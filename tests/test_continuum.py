@@ -411,3 +411,64 @@ def test_law_forms_have_one_home_shared_with_the_fits():
     assert np.array_equal(law.phi(inum), rh.law_value("phi", inum, 0.6, 0.3, 0.9))
     jop = LocalLaw(0.36, 0.9 - 0.36, 0.02, 0.6, 0.3, 0.9, 1e-4, 0.5, mu_form="jop")
     assert np.array_equal(jop.mu(inum), rh.jop_value(inum, 0.36, 0.9, 0.02))
+
+
+# ------------------------------------------------------------------------------------------------
+# the models with phi(x) given (granflow.continuum.given_phi): the DEM's phi, only the flow rule
+# ------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("A", [0.5, 2.0])
+def test_given_constant_phi_is_the_airy_closed_form(A):
+    from granflow.continuum.given_phi import solve_nonlocal_given_phi
+
+    law = const_phi_law(mu_s=0.38, A_mu=0.7, a_mu=0.8)
+    prob = ChannelProblem(W=60.0, sigma_xx=50.0, u_wall=1.0, g_wall=3.0)
+    nl = solve_nonlocal_given_phi(law, A, prob, [0.0, 30.0], [0.6, 0.6])
+    beta = 0.6 / 50.0
+    x_e = 30.0 - 0.38 / beta
+    lam = (beta / A**2) ** (1.0 / 3.0)
+    ai0, _, bi0, _ = airy(lam * (0.0 - x_e))
+    _, aipc, _, bipc = airy(lam * (30.0 - x_e))
+    a, b = np.linalg.solve([[ai0, bi0], [aipc, bipc]], [3.0, 0.0])
+    ai, _, bi, _ = airy(lam * (nl.x - x_e))
+    # second-order differences on 20,001 points
+    np.testing.assert_allclose(nl.fluidity, a * ai + b * bi, rtol=1e-5, atol=1e-8)
+    np.testing.assert_allclose(nl.sigma_xy, 0.6 * (30.0 - nl.x), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("model", ["local", "nonlocal"])
+def test_given_the_models_own_phi_the_given_phi_solvers_return_the_same_profile(model):
+    from granflow.continuum.given_phi import solve_local_given_phi, solve_nonlocal_given_phi
+
+    prob = local_g_wall(LAW, W=60.0, sigma_xx=30.0, u_wall=0.0, x0=2.0)
+    prob = ChannelProblem(W=60.0, sigma_xx=30.0, u_wall=0.0, x0=2.0, g_wall=2.0 * prob.g_wall)
+    own = (solve_local(LAW, prob) if model == "local"
+           else solve_nonlocal(LAW, 0.3, prob, n=4001))
+    xs = np.linspace(prob.x0, prob.half_width, 20001)
+    phi = own.evaluate(xs)["phi"] if own.evaluate is not None else np.interp(xs, own.x, own.phi)
+    given = (solve_local_given_phi(LAW, prob, xs, phi) if model == "local"
+             else solve_nonlocal_given_phi(LAW, 0.3, prob, xs, phi))
+    ref = own.at(given.x)
+    span = own.u_max - prob.u_wall
+    assert span > 1.0
+    # (measured: 1e-8 in the stress, 1e-6 of the span in u)
+    np.testing.assert_allclose(given.sigma_xy, ref["sigma_xy"], rtol=0, atol=1e-7 * 30.0)
+    np.testing.assert_allclose(given.u, ref["u"], rtol=0, atol=1e-5 * span)
+    assert given.mass() == pytest.approx(own.mass(), rel=1e-8)
+
+
+def test_given_phi_bad_input_is_refused():
+    from granflow.continuum.given_phi import solve_nonlocal_given_phi
+
+    prob = ChannelProblem(W=60.0, sigma_xx=50.0, u_wall=1.0, g_wall=3.0)
+    law = const_phi_law()
+    for xp, ph, match in (([0.0, 30.0], [0.6], "one value per position"),
+                          ([30.0, 0.0], [0.6, 0.6], "increasing"),
+                          ([0.0, 30.0], [0.6, 1.2], "0 < phi < 1"),
+                          ([0.0, 30.0], [0.6, np.nan], "finite")):
+        with pytest.raises(ParameterError, match=match):
+            solve_nonlocal_given_phi(law, 0.5, prob, xp, ph)
+    with pytest.raises(ParameterError, match="invalid A = 0"):
+        solve_nonlocal_given_phi(law, 0.0, prob, [0.0, 30.0], [0.6, 0.6])
+    # a stress ratio beyond the calibrated range, as the models' own solvers refuse it
+    with pytest.raises(ParameterError, match=r"mu\(I_max\)"):
+        solve_nonlocal_given_phi(const_phi_law(I_max=0.01), 0.5, prob, [0.0, 30.0], [0.6, 0.6])

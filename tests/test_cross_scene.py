@@ -192,6 +192,9 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
     z = pl.read_parquet(out / "compare.parquet")
     assert set(z["model"].to_list()) == {"local", "nonlocal"}
     assert set(z["zone"].to_list()) <= set(cm.ZONES) and z["u_rel"].is_finite().all()
+    dem = pl.read_parquet(out / "dem_phi.parquet")
+    assert dem.height == cases.height and (dem["A_best"] > 0).all()
+    assert dem["nonlocal_best_u_rel"].is_finite().all()
     b = pl.read_parquet(out / "boundary.parquet")
     assert sorted(set(b["bin"].to_list())) == list(cm.BOUNDARY_BINS)
     assert (b["A_best"] > 0).all() and b["u_rel_held"].is_finite().all()
@@ -299,3 +302,22 @@ def test_one_runs_directory_is_a_case(tmp_path):
         cm.run_case(_run_dir(tmp_path / "acc", "accelerating"))
     with pytest.raises(ParameterError, match="no bins.parquet, series.parquet"):
         cm.run_case(tmp_path)
+
+
+def test_the_dem_phi_variant_carries_the_runs_own_stress(constants):
+    case = next(c for c in cm.channel_cases(CHANNEL) if c.W == 60 and c.phi_bar == 0.61)
+    law = constants.law_for(case.pressure())[1]
+    xi, phi = case.profile["xi"].to_numpy(), case.profile["phi"].to_numpy()
+    # (B2) with the DEM's phi: the wall bin's stress is the DEM's solid above it (phi held
+    # past the last bin centre)
+    solid = float(np.sum(0.5 * (phi[1:] + phi[:-1]) * np.diff(xi))) + phi[-1] * (30.0 - xi[-1])
+    for model in cm.MODELS:
+        prof = cm.solve(model, law, case, 0.5, phi="dem")
+        assert prof.sigma_xy[0] == pytest.approx(solid, rel=1e-6)
+        np.testing.assert_allclose(prof.at(xi)["phi"], phi, rtol=0, atol=1e-4)
+    own = cm.solve("nonlocal", law, case, 0.5)
+    assert own.sigma_xy[0] < solid  # the model's plug packs looser than the DEM's
+    with pytest.raises(ParameterError, match="invalid phi = 'cell'"):
+        cm.solve("nonlocal", law, case, 0.5, phi="cell")
+    pred = cm.predict_channel(constants, case, n_band=0, phi="dem")
+    assert pred.cases["phi"][0] == "dem" and pred.cases["nonlocal_u_rel"].is_finite().all()

@@ -11,7 +11,7 @@ import os
 import time
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from granflow.continuum import (
 )
 from granflow.continuum.calibration import Calibration, calibrate
 from granflow.continuum.constants import ModelConstants
+from granflow.continuum.given_phi import solve_local_given_phi, solve_nonlocal_given_phi
 from granflow.errors import GranflowError, ParameterError
 
 #: I below which a profile counts as plug (both the DEM's bins and the models'): the DEM's
@@ -41,6 +42,8 @@ A_WIDTH, A_PHI_BAR = 40.0, 0.60
 ZONES = ("plug", "dense", "loose", "wall")
 #: the continuum models (:func:`solve`)
 MODELS = ("local", "nonlocal")
+#: where the models' phi comes from (:func:`solve`): their law's phi(I), or the DEM run's
+PHI_SOURCES = ("model", "dem")
 
 
 @dataclass
@@ -185,13 +188,22 @@ def law_for(case: ChannelCase, cal: Mapping[float, Calibration]) -> Calibration:
     return min(cal.values(), key=lambda c: abs(math.log(c.p_ext / case.pressure())))
 
 
-def solve(model: str, law: LocalLaw, case: ChannelCase, A: float) -> Profile:
+def solve(model: str, law: LocalLaw, case: ChannelCase, A: float, phi: str = "model",
+          k: int = 0) -> Profile:
     """The ``model`` ("local" or "nonlocal", amplitude ``A``) of ``case`` with ``law``, its
-    boundary data from the wall bin."""
+    boundary data from bin ``k`` (0: the wall bin); ``phi`` "model": the law's phi(I) (the
+    models as Henann & Kamrin), "dem": the run's own phi profile
+    (granflow.continuum.given_phi: the DEM's stress, only the flow rule modelled)."""
     if model not in MODELS:
         raise ParameterError(f"invalid model = {model!r}: allowed one of {MODELS}")
-    return (solve_local(law, case.problem()) if model == "local"
-            else solve_nonlocal(law, A, case.problem()))
+    if phi not in PHI_SOURCES:
+        raise ParameterError(f"invalid phi = {phi!r}: allowed one of {PHI_SOURCES}")
+    prob = case.problem(k)
+    if phi == "dem":
+        xi, ph = case.profile["xi"].to_numpy(), case.profile["phi"].to_numpy()
+        return (solve_local_given_phi(law, prob, xi, ph) if model == "local"
+                else solve_nonlocal_given_phi(law, A, prob, xi, ph))
+    return solve_local(law, prob) if model == "local" else solve_nonlocal(law, A, prob)
 
 
 def velocity_misfit(case: ChannelCase, prof: Profile, k: int = 0) -> float:
@@ -203,15 +215,15 @@ def velocity_misfit(case: ChannelCase, prof: Profile, k: int = 0) -> float:
     return float(np.sqrt(np.mean(((um - u[k + 1:]) / (u[-1] - u[0])) ** 2)))
 
 
-def fit_amplitude(law: LocalLaw, case: ChannelCase, k: int = 0) -> float:
+def fit_amplitude(law: LocalLaw, case: ChannelCase, k: int = 0, phi: str = "model") -> float:
     """The nonlocal amplitude A that best fits the DEM velocity profile of ``case`` with
     the boundary data of bin ``k`` (least squares of (u - u_slip)/(u_max - u_slip) over the
-    bins past ``k``; bounded search in log10 A)."""
+    bins past ``k``; bounded search in log10 A), phi as :func:`solve`'s."""
     from scipy.optimize import minimize_scalar
 
     def cost(la: float) -> float:
         try:
-            return velocity_misfit(case, solve_nonlocal(law, 10**la, case.problem(k)), k)
+            return velocity_misfit(case, solve("nonlocal", law, case, 10**la, phi, k), k)
         except GranflowError:
             return 1e3
 
@@ -303,13 +315,14 @@ class ChannelPrediction:
 
 
 def _band(case: ChannelCase, laws: Sequence[LocalLaw], model: str, A: float,
-          xi: FloatArray) -> tuple[dict[str, FloatArray], int]:
+          xi: FloatArray, phi: str = "model") -> tuple[dict[str, FloatArray], int]:
     """16th and 84th percentiles of u - u_wall, du/dx and phi over ``laws`` at ``xi``
     (continuum.prediction_band), and how many laws failed to solve; NaN without laws."""
     if not laws:
         nan = np.full(xi.shape, math.nan)
         return {f"{n}_{e}": nan for n in ("du", "dudx", "phi") for e in ("lo", "hi")}, 0
-    band = prediction_band(laws, lambda law, prob: solve(model, law, case, A), case.problem(),
+    band = prediction_band(laws, lambda law, prob: solve(model, law, case, A, phi),
+                           case.problem(),
                            quantiles=(0.16, 0.84), x=xi)
     out = {}
     for key, name in (("u", "du"), ("dudx", "dudx"), ("phi", "phi")):
@@ -320,12 +333,14 @@ def _band(case: ChannelCase, laws: Sequence[LocalLaw], model: str, A: float,
 def predict_channel(constants: ModelConstants,
                     source: str | os.PathLike[str] | ChannelCase | Sequence[ChannelCase],
                     n_band: int = 24, models: Sequence[str] = MODELS,
-                    log: Any = None) -> ChannelPrediction:
+                    log: Any = None, phi: str = "model") -> ChannelPrediction:
     """Predict channel runs with constants fitted once and held (nothing is refitted): every
     steady run of a reproduce_000 dataset, one run's directory of ``granflow run``, or
     :class:`ChannelCase` objects (:func:`cases_of`), with each of ``models``, and bands from
     ``n_band`` laws drawn from the constants' covariances (none without them, or with
-    ``n_band = 0``). ``log``: a callable for one line per run (None: quiet).
+    ``n_band = 0``); ``phi`` "model" (the law's phi(I)) or "dem" (each run's own phi
+    profile: the DEM's stress, only the flow rule modelled; :func:`solve`). ``log``: a
+    callable for one line per run (None: quiet).
 
         constants = ModelConstants.load("docs/data/cross_scene/model.parquet")
         pred = predict_channel(constants, "runs/my_channel")
@@ -345,16 +360,16 @@ def predict_channel(constants: ModelConstants,
         xi = t["xi"].to_numpy()
         laws = constants.sample(p_cal, n_band, seed=2) if n_band else []
         row: dict[str, Any] = {
-            "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed, "p_cal": p_cal,
+            "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed, "phi": phi, "p_cal": p_cal,
             "sigma_xx_d_kn": case.pressure(), "mu_wall": float(t["mu"][0]), "A": A,
             "dem_du": float(t["u"][-1] - t["u"][0]),
             "dem_plug": plug_half_width(xi, t["I"].to_numpy(), I_PLUG),
             "dem_delta_095": case.delta_095,
             "dem_mass": float(case.phi_bar * case.W / 2)}
         for model in models:
-            prof = solve(model, law, case, A)
+            prof = solve(model, law, case, A, phi)
             m = prof.at(xi)
-            band, failed = _band(case, laws, model, A, xi)
+            band, failed = _band(case, laws, model, A, xi, phi)
             row.update({f"{model}_du": float(m["u"][-1] - m["u"][0]),
                         f"{model}_plug": plug_half_width(xi, m["I"], I_PLUG),
                         # (a local plug that only slides has no delta_0.95)
@@ -395,6 +410,8 @@ class Prediction:
     seconds: float
     #: nonlocal solves that reached only a relaxed tolerance (solve_nonlocal's warning)
     relaxed: int = 0
+    #: the models with each run's own phi profile (:func:`dem_phi_table`)
+    dem_phi: pl.DataFrame = field(default_factory=pl.DataFrame)
 
     @property
     def A(self) -> float:
@@ -424,6 +441,29 @@ def reference_case(cases: Sequence[ChannelCase], reference: tuple[float, float]
             f"phi_bar = {reference[1]:g} to fit the amplitude on; allowed one of "
             f"{', '.join(f'({w:g}, {p:g})' for w, p in have)}, or a given A")
     return at[0]
+
+
+def dem_phi_table(cal: Mapping[float, Calibration], cases: Sequence[ChannelCase],
+                  ref: ChannelCase | None) -> pl.DataFrame:
+    """The models with each run's own phi profile (``phi = "dem"``: the DEM's stress, only
+    the flow rule modelled): per run the local misfit, the nonlocal run's own best A and its
+    misfit, and the misfit with the A fitted (so) on ``ref`` held; whole-channel velocity
+    misfits (:func:`velocity_misfit`), boundary data at the wall bin."""
+    a_ref = (fit_amplitude(law_for(ref, cal).law, ref, 0, "dem") if ref is not None
+             else math.nan)
+    rows = []
+    for case in cases:
+        law = law_for(case, cal).law
+        a = fit_amplitude(law, case, 0, "dem")
+        rows.append({
+            "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed,
+            "local_u_rel": velocity_misfit(case, solve("local", law, case, 0.0, "dem")),
+            "A_best": a,
+            "nonlocal_best_u_rel": velocity_misfit(case, solve("nonlocal", law, case, a, "dem")),
+            "A_ref": a_ref,
+            "nonlocal_u_rel": (velocity_misfit(case, solve("nonlocal", law, case, a_ref, "dem"))
+                               if math.isfinite(a_ref) else math.nan)})
+    return pl.DataFrame(rows)
 
 
 def predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int = 24,
@@ -458,6 +498,7 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
         constants = constants_of(cal, A, float(np.std(a_draws, ddof=1)), ref.name)
         log(f"nonlocal amplitude A = {A:.4g} ± {constants.A_se:.2g} (fitted on {ref.name})")
     else:
+        ref = None
         boundary = boundary_sensitivity(cal, cases, None, A=A)
         constants = constants_of(cal, A, A_se, "given")
         log(f"nonlocal amplitude A = {A:.4g} (given, held)")
@@ -472,5 +513,6 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
         log(f"  W = {r['W']:g}, phi_bar = {r['phi_bar']:g}: local u_rel {r['local_u_rel']:.3f}"
             f", nonlocal {r['nonlocal_u_rel']:.3f} (own best A = {r['A_best']:.3g}: "
             f"{r['nonlocal_best_u_rel']:.3f})")
+    dem = dem_phi_table(cal, cases, ref)
     return Prediction(cal, constants, cases_tab, pc.zones, pc.profiles, pc.residuals, boundary,
-                      time.perf_counter() - t0)
+                      time.perf_counter() - t0, dem_phi=dem)

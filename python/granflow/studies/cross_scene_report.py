@@ -184,6 +184,53 @@ def _boundary_table(b: pl.DataFrame) -> pl.DataFrame:
     ).sort("bin")
 
 
+def dem_phi_lines(pred: Prediction) -> list[str]:
+    """The section on the models with each run's own phi profile (``dem_phi.parquet``): does
+    the amplitude transfer once the stress is the DEM's? Empty without that table."""
+    d = pred.dem_phi
+    if not d.height:
+        return []
+    bound = pred.boundary.filter(pl.col("bin") == 0)
+    spread = {"the model's phi(I)": bound["A_best"], "the DEM's phi": d["A_best"]}
+    held = {"the model's phi(I)": pred.cases.filter(~_is_ref())["nonlocal_u_rel"],
+            "the DEM's phi": d.filter(~_is_ref())["nonlocal_u_rel"]}
+    a_ref = float(d["A_ref"][0])
+    ratio = {k: float(v.max()) / float(v.min()) for k, v in spread.items()}  # type: ignore[arg-type]
+    base = math.log(ratio["the model's phi(I)"])
+    narrowing = math.log(ratio["the DEM's phi"]) / base if base > 1e-9 else 1.0
+    words = "; ".join(
+        f"with {k}: own best A {float(v.min()):.2f}-{float(v.max()):.2f} "  # type: ignore[arg-type]
+        f"(x{float(v.max()) / float(v.min()):.2f}), held A's median misfit "  # type: ignore[arg-type]
+        f"{float(held[k].median()):.3f}"  # type: ignore[arg-type]
+        for k, v in spread.items())
+    tab = d.select(*_run(d), pl.col("local_u_rel").alias("u misfit local"),
+                   pl.col("nonlocal_u_rel").alias(f"nonlocal, A = {a_ref:.3g} held"),
+                   pl.col("nonlocal_best_u_rel").alias("nonlocal, own best A"),
+                   pl.col("A_best").alias("own best A"))
+    return ["## The models with the DEM's phi", "",
+            "Both models with each run's own phi profile in place of the law's phi(I) "
+            "(granflow.continuum.given_phi: the stress is the DEM's, only the flow rule is "
+            "modelled; boundary data at the wall bin); A fitted so on the reference run "
+            f"({a_ref:.3g}) and held, or each run's own:", "",
+            md_table(tab), "",
+            f"Whole-channel velocity misfits, {words}. If the models' phi (0.590 in the plug, "
+            "where the DEM packs 0.62-0.65) were what made A vary with W and phi_bar, the "
+            "DEM's phi would gather the runs' own amplitudes: "
+            + ("**it does not** (the spread hardly narrows): the amplitude's trend is the "
+               "flow rule's, not the models' packing." if narrowing > GATHERED else
+               f"**it narrows their spread** to {narrowing:.2f} of the model's: part of the "
+               "amplitude's trend is the models' packing."), ""]
+
+
+#: the DEM's phi "gathers" the amplitudes where it shrinks log(max A / min A) below this
+#: fraction of the model's
+GATHERED = 0.75
+
+
+def _is_ref() -> pl.Expr:
+    return (pl.col("W") == A_WIDTH) & (pl.col("phi_bar") == A_PHI_BAR)
+
+
 def findings(pred: Prediction) -> list[str]:
     """Where each model works and where it fails, from the numbers."""
     c = pred.cases
@@ -307,6 +354,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     pred.profiles.write_parquet(out / "model_profiles.parquet")
     pred.residuals.write_parquet(out / "residuals.parquet")
     pred.boundary.write_parquet(out / "boundary.parquet")
+    pred.dem_phi.write_parquet(out / "dem_phi.parquet")
     figdir = path.parent / f"{path.stem}_figures"
     rel = path.parent
     figs = [plot_law(pred, figdir / "law.png")]
@@ -340,7 +388,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         f"('{out}/model.parquet')` and `granflow.continuum.channel_model.predict_channel`; "
         "the comparison is `cases.parquet` (one row "
         "per channel run), `compare.parquet` (misfit per zone), `model_profiles.parquet`, "
-        "`residuals.parquet` and `boundary.parquet` beside them. Channel data: "
+        "`residuals.parquet`, `boundary.parquet` and `dem_phi.parquet` beside them. Channel "
+        "data: "
         f"`{channel}/points.parquet` and `profiles.parquet` (the reproduce_000 campaign, kn = "
         "1e5).", "",
         "## Time", "",
@@ -418,6 +467,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "the wall bin; A refitted on the reference run for each k, the misfits over the bins "
         "past k (so the columns compare the amplitude's transfer, not the models' reach):", "",
         md_table(_boundary_table(pred.boundary), {"x0": ".2f"}), "",
+        *dem_phi_lines(pred),
         "## 4. The DEM's bins against the cell's law (000's loose-zone claim)", "",
         "Each DEM bin's mu and phi against the cell's law at the bin's own I; in range: the "
         "bins whose I lies in the calibrated range (the others would test an extrapolation):",
