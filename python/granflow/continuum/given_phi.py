@@ -63,10 +63,19 @@ def _profile(model: str, A: float, law: LocalLaw, prob: ChannelProblem, x: Float
                    I=dudx / prob.shear_rate_scale, fluidity=g, model=model, A=A, info=info)
 
 
-def _grid(prob: ChannelProblem, n: int) -> FloatArray:
+def _given(law: LocalLaw, prob: ChannelProblem, x_phi: npt.ArrayLike, phi: npt.ArrayLike,
+           n: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The grid (``n`` uniform points on [x0, W/2]), phi on it, the stress and mu; refused
+    where the wall stress ratio exceeds ``law.mu_max``."""
     if int(n) != n or n < 3:
         raise bad("n", n, "an integer >= 3")
-    return np.linspace(prob.x0, prob.half_width, int(n))
+    x = np.linspace(prob.x0, prob.half_width, int(n))
+    ph = _phi_on(x, x_phi, phi)
+    s = _stress(prob, x, ph)
+    mu = s / prob.sigma_xx
+    if mu[0] > law.mu_max:
+        raise _stress_ratio_error(law, float(mu[0]), prob)
+    return x, ph, s, mu
 
 
 def solve_local_given_phi(law: LocalLaw, prob: ChannelProblem, x_phi: npt.ArrayLike,
@@ -75,12 +84,7 @@ def solve_local_given_phi(law: LocalLaw, prob: ChannelProblem, x_phi: npt.ArrayL
     from the wall) instead of the law's phi(I): the stress from (B2) by quadrature, then
     ``du/dx = I_of_mu(mu) sqrt(sigma_xx/rho_p)/d``. Raises ParameterError where the wall
     stress ratio exceeds ``law.mu_max`` (as :func:`granflow.continuum.solve_local`)."""
-    x = _grid(prob, n)
-    ph = _phi_on(x, x_phi, phi)
-    s = _stress(prob, x, ph)
-    mu = s / prob.sigma_xx
-    if mu[0] > law.mu_max:
-        raise _stress_ratio_error(law, float(mu[0]), prob)
+    x, ph, s, mu = _given(law, prob, x_phi, phi, n)
     with np.errstate(under="ignore"):
         c = prob.shear_rate_scale
         dudx = c * law.I_of_mu(mu)
@@ -103,12 +107,7 @@ def solve_nonlocal_given_phi(law: LocalLaw, A: float, prob: ChannelProblem,
         raise bad("A", A, "> 0")
     if prob.g_wall is None:
         raise bad("g_wall", None, "> 0 (the nonlocal model needs the wall fluidity)")
-    x = _grid(prob, n)
-    ph = _phi_on(x, x_phi, phi)
-    s = _stress(prob, x, ph)
-    mu = s / prob.sigma_xx
-    if mu[0] > law.mu_max:
-        raise _stress_ratio_error(law, float(mu[0]), prob)
+    x, ph, s, mu = _given(law, prob, x_phi, phi, n)
     c = prob.shear_rate_scale
     with np.errstate(under="ignore"):
         gl = _g_loc(law, mu, c)
