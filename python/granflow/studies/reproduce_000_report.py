@@ -917,12 +917,15 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
     the plan is done."""
     from granflow.sizes import CHANNEL_MIX
-    from granflow.studies.reproduce_000 import Point
 
     from ._campaign import done_keys
 
-    done = done_keys(out, Point)
-    left = [p for p in (*plan.points, *plan.branches, *plan.later) if p.key not in done]
+    planned = (*plan.points, *plan.branches, *plan.later)
+    if not planned:
+        return []
+    # (the plan's own point class: this module may not import reproduce_000, which imports it)
+    done = done_keys(out, type(planned[0]))
+    left = [p for p in planned if p.key not in done]
     if not left:
         return []
     r = UNMEASURED_RATE if rate is None else rate
