@@ -30,7 +30,7 @@ from granflow.continuum import (
     solve_nonlocal,
 )
 from granflow.continuum.calibration import Calibration, calibrate
-from granflow.continuum.constants import ModelConstants
+from granflow.continuum.constants import ModelConstants, nearest_pressure
 from granflow.continuum.given_phi import solve_local_given_phi, solve_nonlocal_given_phi
 from granflow.errors import GranflowError, ParameterError
 
@@ -185,7 +185,7 @@ def cases_of(source: str | os.PathLike[str] | ChannelCase | Sequence[ChannelCase
 
 def law_for(case: ChannelCase, cal: Mapping[float, Calibration]) -> Calibration:
     """The calibration at the pressure nearest (in log) to the channel's sigma_xx d/kn."""
-    return min(cal.values(), key=lambda c: abs(math.log(c.p_ext / case.pressure())))
+    return cal[nearest_pressure(cal, case.pressure())]
 
 
 def solve(model: str, law: LocalLaw, case: ChannelCase, A: float, phi: str = "model",
@@ -292,9 +292,8 @@ def boundary_sensitivity(cal: Mapping[float, Calibration], cases: Sequence[Chann
             rows.append({
                 "bin": k, "x0": float(case.profile["xi"][k]), "W": case.W,
                 "phi_bar": case.phi_bar, "seed": case.seed, "A_best": a, "A_ref": a_ref,
-                "u_rel_best": velocity_misfit(case, solve_nonlocal(law, a, case.problem(k)), k),
-                "u_rel_held": (velocity_misfit(case, solve_nonlocal(law, a_ref,
-                                                                    case.problem(k)), k)
+                "u_rel_best": velocity_misfit(case, solve("nonlocal", law, case, a, k=k), k),
+                "u_rel_held": (velocity_misfit(case, solve("nonlocal", law, case, a_ref, k=k), k)
                                if math.isfinite(a_ref) else math.nan)})
     return pl.DataFrame(rows)
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -23,6 +23,14 @@ from .laws import LocalLaw
 #: the file metadata key that marks a constants table (and its format version)
 TABLE_KEY = "granflow.model_constants"
 TABLE_VERSION = 1
+
+
+def nearest_pressure(pressures: Iterable[float], pressure: float) -> float:
+    """The calibration pressure nearest (in log) to ``pressure`` (a channel's
+    sigma_xx d/kn): the one rule for which law a channel takes."""
+    if not (math.isfinite(pressure) and pressure > 0):
+        raise bad("pressure", pressure, "a finite sigma_xx d/kn > 0")
+    return min(pressures, key=lambda q: abs(math.log(q / pressure)))
 
 
 @dataclass(frozen=True)
@@ -56,9 +64,7 @@ class ModelConstants:
     def law_for(self, pressure: float) -> tuple[float, LocalLaw]:
         """The calibration pressure nearest (in log) to ``pressure`` (a channel's
         sigma_xx d/kn) and its law."""
-        if not (math.isfinite(pressure) and pressure > 0):
-            raise bad("pressure", pressure, "a finite sigma_xx d/kn > 0")
-        p = min(self.laws, key=lambda q: abs(math.log(q / pressure)))
+        p = nearest_pressure(self.laws, pressure)
         return p, self.laws[p]
 
     def sample(self, p_ext: float, n: int, seed: int = 0) -> list[LocalLaw]:

@@ -54,7 +54,7 @@ def _stress(prob: ChannelProblem, x: FloatArray, phi: FloatArray) -> FloatArray:
     return np.asarray(prob.rho_p * prob.g * tail)
 
 
-def _profile(model: str, A: float, law: LocalLaw, prob: ChannelProblem, x: FloatArray,
+def _profile(model: str, A: float, prob: ChannelProblem, x: FloatArray,
              phi: FloatArray, s: FloatArray, dudx: FloatArray, g: FloatArray,
              info: dict[str, object]) -> Profile:
     u = prob.u_wall + cumulative_trapezoid(dudx, x, initial=0.0)
@@ -89,7 +89,7 @@ def solve_local_given_phi(law: LocalLaw, prob: ChannelProblem, x_phi: npt.ArrayL
         c = prob.shear_rate_scale
         dudx = c * law.I_of_mu(mu)
         g = _g_loc(law, mu, c)
-    return _profile("local", 0.0, law, prob, x, ph, s, dudx, g, {"mu_wall": float(mu[0]),
+    return _profile("local", 0.0, prob, x, ph, s, dudx, g, {"mu_wall": float(mu[0]),
                                                                "phi": "given"})
 
 
@@ -128,4 +128,4 @@ def solve_nonlocal_given_phi(law: LocalLaw, A: float, prob: ChannelProblem,
     g[0] = prob.g_wall
     g[1:] = solve_banded((1, 1), ab, rhs)
     info = {"mu_wall": float(mu[0]), "phi": "given", "nodes": int(x.size)}
-    return _profile("nonlocal", float(A), law, prob, x, ph, s, mu * g, g, info)
+    return _profile("nonlocal", float(A), prob, x, ph, s, mu * g, g, info)
