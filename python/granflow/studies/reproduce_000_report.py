@@ -627,13 +627,17 @@ def plot_profiles(rows: pl.DataFrame, profiles: pl.DataFrame, path: Path, title:
 # --------------------------------------------------------------------------------------------
 # cost
 # --------------------------------------------------------------------------------------------
-def _particle_steps(plan: Any) -> Callable[[Any], float]:
-    """A point of ``plan`` (reproduce_000.paper_plan) to its t_max at its dt: its particle
-    count from W H B phi_bar / <pi d^3/6> of 000's mix, times its steps."""
+def _particles(p: Any) -> float:
+    """A point's particle count: W H B phi_bar / <pi d^3/6> of 000's mix."""
     from granflow.sizes import CHANNEL_MIX
 
-    v = CHANNEL_MIX.mean_volume
-    return lambda p: p.W * p.H * p.B * p.phi_bar / v * plan.t_max / p.dt
+    return float(p.W * p.H * p.B * p.phi_bar / CHANNEL_MIX.mean_volume)
+
+
+def _particle_steps(plan: Any) -> Callable[[Any], float]:
+    """A point of ``plan`` (reproduce_000.paper_plan) to its t_max at its dt: its particles
+    (:func:`_particles`) times its steps."""
+    return lambda p: _particles(p) * plan.t_max / p.dt
 
 
 # --------------------------------------------------------------------------------------------
@@ -916,8 +920,6 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     minimum average) to its cap (t_max), less what a started run has done (its series in
     ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
     the plan is done."""
-    from granflow.sizes import CHANNEL_MIX
-
     from ._campaign import done_keys
 
     planned = (*plan.points, *plan.branches, *plan.later)
@@ -935,7 +937,7 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
         series = out / "work" / p.key / "series.parquet"
         t_done = (float(pl.read_parquet(series, columns=["t"])["t"].max())  # type: ignore[arg-type]
                   if series.exists() and not p.parent else 0.0)
-        per_t = p.W * p.H * p.B * p.phi_bar / CHANNEL_MIX.mean_volume / p.dt / r / 3600
+        per_t = _particles(p) / p.dt / r / 3600  # core-hours per unit of time
         row = rows.setdefault((p.W, p.kn, p.B), {"W": p.W, "k_n": p.kn, "B": p.B, "runs": 0,
                                                  "core-hours (least)": 0.0,
                                                  "core-hours (cap)": 0.0,
@@ -967,7 +969,8 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
                          f"{math.ceil(1.25 * longest):d}:00:00", plan.name)]
 
 
-def _cost_section(points: pl.DataFrame, paper: Any) -> list[str]:
+def _cost_section(points: pl.DataFrame, paper: Any) -> tuple[list[str], float]:
+    """The cost and paper-scale sections' lines, and the measured throughput."""
     # (per W: points, particles, preparation and run wall time, core-hours; the throughput
     # of the runs only)
     per, rate = cost(points, ["W", "kn"], "n", "steps",
@@ -993,7 +996,7 @@ def _cost_section(points: pl.DataFrame, paper: Any) -> list[str]:
             f"({est['core-hours'] / 64:,.0f} hours on 64 cores; fewer where a run "
             "arrests or meets its SE target early).", "",
             *_per_point_cost(paper, rate),
-            *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")]
+            *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")], rate
 
 
 #: two threads against one on the flowing channel (benchmarks/NOTES.md: 3.15-3.35e7 against
@@ -1324,8 +1327,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
                                    for p in figs] + [""]
     rate = None
     if points.height and points["steps"].sum():
-        lines += _cost_section(points, paper)
-        rate = cost(points, ["W"], "n", "steps", prep="prep_seconds")[1]
+        text, rate = _cost_section(points, paper)
+        lines += text
     lines += remaining(out, plan, rate)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
