@@ -3,6 +3,13 @@ state (issue 35, item 2).
 
     python benchmarks/lammps_rate_cell.py --mu 0 0.3 --I 0.005 0.015 0.05 0.15 --seeds 1 2 3 \
         --steps 200000 --strain 10 --every 100 [--tau-p 0.1] [--out DIR] [--only-table]
+    python benchmarks/lammps_rate_cell.py --p-ext 1e-5 --mu 0 --I 0.05 0.15 --seeds 1 2 3 \
+        --strain 10 --out DIR_P [--reference DIR] [--thin 3]
+
+``--p-ext`` runs another of 002's pressures (file names gain ``_p<p_ext>``); ``--reference``
+adds each code's change from another pressure's runs at the same I (shift_table: if both codes
+shift alike, the pressure dependence is the particles' stiffness, not this code); ``--thin``
+thins the series for committing (thin_series).
 
 What it does, per point (mu_s, I) and seed (N = 2000, p_ext a/kn = 1e-4, normal "yy"):
 
@@ -127,9 +134,11 @@ Array = np.ndarray
 
 
 def point_name(mu_s: float, inertial: float, seed: int) -> str:
-    """The file stem of one (mu_s, I, seed) (with the size where it is not the issue's)."""
+    """The file stem of one (mu_s, I, seed) (with the size and p_ext where they are not the
+    issue's)."""
     size = "" if N == 2000 else f"_N{N}"
-    return f"mu{mu_s:g}_I{inertial:g}_s{seed}{size}"
+    pressure = "" if P_EXT == 1e-4 else f"_p{P_EXT:g}"
+    return f"mu{mu_s:g}_I{inertial:g}_s{seed}{size}{pressure}"
 
 
 def series_path(out: Path, code: str, mu_s: float, inertial: float, seed: int) -> Path:
@@ -392,6 +401,57 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
     return rdf, pl.from_dicts(rows, infer_schema_length=None) if rows else pl.DataFrame()
 
 
+def shift_table(runs: pl.DataFrame, reference: pl.DataFrame) -> pl.DataFrame:
+    """Each code's change from ``reference`` (another pressure's runs.parquet, the same points)
+    to ``runs``, per (mu_s, I) and quantity: the shift, its combined SE and z; and whether the
+    two codes shift alike (``codes_z``: granflow's shift less LAMMPS's over their combined SE).
+    The stiffness check of 002's pressure collapse: if the shift is physics (p d/kn), both
+    codes show it; if it is this code, only granflow does."""
+    rows = []
+    keys = ["code", "mu_s", "I"]
+    now = replica_mean(runs, keys, list(QUANTITIES))
+    ref = replica_mean(reference, keys, list(QUANTITIES))
+    for r in now.iter_rows(named=True):
+        m = ref.filter((pl.col("code") == r["code"]) & (pl.col("mu_s") == r["mu_s"])
+                       & (pl.col("I") == r["I"]))
+        if m.is_empty():
+            continue
+        r0 = m.row(0, named=True)
+        for q in QUANTITIES:
+            d, se, z = difference_z(r[q], r[f"{q}_se"], r0[q], r0[f"{q}_se"])
+            rows.append({"mu_s": r["mu_s"], "I": r["I"], "quantity": q, "code": r["code"],
+                         "shift": d, "shift_se": se, "z": z})
+    if not rows:
+        return pl.DataFrame()
+    tab = pl.from_dicts(rows)
+    out = []
+    for (mu_s, inertial, q), g in tab.group_by(["mu_s", "I", "quantity"], maintain_order=True):
+        by = {r["code"]: r for r in g.iter_rows(named=True)}
+        if not all(c in by for c in CODES):
+            continue
+        gf, lm = by["granflow"], by["lammps"]
+        _, _, cz = difference_z(gf["shift"], gf["shift_se"], lm["shift"], lm["shift_se"])
+        out.append({"mu_s": mu_s, "I": inertial, "quantity": q,
+                    "shift_granflow": gf["shift"], "shift_granflow_se": gf["shift_se"],
+                    "z_granflow": gf["z"], "shift_lammps": lm["shift"],
+                    "shift_lammps_se": lm["shift_se"], "z_lammps": lm["z"], "codes_z": cz,
+                    "codes": "shift alike" if agrees(cz) else "shift apart"})
+    return pl.from_dicts(out) if out else pl.DataFrame()
+
+
+def print_shift(shift: pl.DataFrame, p_ref: str) -> None:
+    """The shift table, one line per point and quantity."""
+    print(f"\nchange from the reference ({p_ref}) in each code; codes_z: granflow's shift less "
+          "LAMMPS's over the combined SE")
+    print(f"{'mu_s':>5} {'I':>6} {'quantity':>9} {'granflow shift':>22} {'LAMMPS shift':>22} "
+          f"{'codes_z':>7}")
+    for r in shift.iter_rows(named=True):
+        cells = [f"{r[f'shift_{c}']:>+10.5f} ± {r[f'shift_{c}_se']:<7.5f} (z {r[f'z_{c}']:+.1f})"
+                 for c in CODES]
+        print(f"{r['mu_s']:>5g} {r['I']:>6g} {r['quantity']:>9} {cells[0]} {cells[1]} "
+              f"{r['codes_z']:>+7.2f}  {r['codes']}")
+
+
 def print_table(table: pl.DataFrame) -> None:
     """The comparison table, one line per point and quantity."""
     if table.is_empty():
@@ -404,6 +464,28 @@ def print_table(table: pl.DataFrame) -> None:
               f"{r['granflow']:>11.5f} ± {r['granflow_se']:<7.5f} "
               f"{r['lammps']:>11.5f} ± {r['lammps_se']:<7.5f} {r['diff']:>+10.5f} "
               f"{r['z']:>+6.2f}  {r['verdict']}")
+
+
+def thin_series(out: Path, k: int) -> int:
+    """Keep every ``k``-th sample of each series in OUT/series not thinned before (its .json
+    records ``thinned``; ``every`` becomes the kept spacing): a lower pressure needs
+    sqrt(1e-4/p_ext) times the steps for the same strain, so its series are thinned to the
+    p_ext = 1e-4 runs' samples per unit strain before they are committed. The statistics are
+    blocking SEs of correlated samples, which thinning below the correlation time leaves
+    alone. Returns the number of series thinned."""
+    done = 0
+    for f in sorted((out / "series").glob("*.parquet")):
+        meta_path = f.with_suffix(".json")
+        meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+        if "thinned" in meta:
+            continue
+        pl.read_parquet(f).gather_every(k).write_parquet(f)
+        meta["sampled_every"] = meta.get("every")
+        meta["every"] = meta["sampled_every"] * k if meta["sampled_every"] else None
+        meta["thinned"] = k
+        _write_json(meta_path, meta)
+        done += 1
+    return done
 
 
 # ----------------------------------------------------------------------------------------------
@@ -483,7 +565,7 @@ def run_one(out: Path, mu_s: float, inertial: float, seed: int, steps: int, ever
 
 def main(argv: list[str] | None = None) -> None:
     """The command line (module docstring)."""
-    global N
+    global N, P_EXT
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--mu", type=float, nargs="+", default=[0.0, 0.3], help="mu_s values")
     ap.add_argument("--I", type=float, nargs="+", default=[0.005, 0.015, 0.05, 0.15],
@@ -499,15 +581,32 @@ def main(argv: list[str] | None = None) -> None:
                          "(module docstring)")
     ap.add_argument("--n", type=int, default=N,
                     help="the cell's N (solid volume in mean particles; the issue's 2000)")
+    ap.add_argument("--p-ext", type=float, default=P_EXT,
+                    help="the held sigma_yy in kn/a (the issue's 1e-4; 002's other pressures "
+                         "are 1e-5 and 1e-6: the same I then needs sqrt(1e-4/p_ext) times the "
+                         "steps)")
     ap.add_argument("--drop", type=float, default=0.1,
                     help="fraction of each run dropped at least (besides the MSER start)")
     ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--reference", default=None,
+                    help="another pressure's OUT (its runs.parquet): print and write "
+                         "OUT/shift.parquet, each code's change from it (shift_table)")
+    ap.add_argument("--thin", type=int, default=None,
+                    help="keep every K-th sample of the series in OUT not thinned before, "
+                         "then build the table (thin_series; for committing low-pressure runs)")
     ap.add_argument("--only-table", action="store_true",
                     help="recompute the table from the series present; run nothing")
     a = ap.parse_args(argv)
     N = a.n  # read by make_cell and point_name
+    if not (math.isfinite(a.p_ext) and a.p_ext > 0):
+        ap.error(f"--p-ext must be finite and > 0, got {a.p_ext}")
+    P_EXT = a.p_ext  # read by make_cell, point_name and build_tables
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
+    if a.thin is not None:
+        if a.thin < 1:
+            ap.error(f"--thin must be >= 1, got {a.thin}")
+        print(f"thinned {thin_series(out, a.thin)} series: every {a.thin}-th sample kept")
     if not a.only_table:
         for mu_s in a.mu:
             for inertial in a.I:
@@ -524,6 +623,15 @@ def main(argv: list[str] | None = None) -> None:
     if not table.is_empty():
         table.write_parquet(out / "table.parquet")
         print(f"wrote {out / 'table.parquet'}")
+    if a.reference is not None and not runs.is_empty():
+        ref = pl.read_parquet(Path(a.reference) / "runs.parquet")
+        shift = shift_table(runs, ref)
+        if shift.is_empty():
+            print(f"no point of {a.reference} matches these runs")
+        else:
+            print_shift(shift, a.reference)
+            shift.write_parquet(out / "shift.parquet")
+            print(f"wrote {out / 'shift.parquet'}")
 
 
 if __name__ == "__main__":

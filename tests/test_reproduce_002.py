@@ -73,3 +73,43 @@ def test_the_report_has_table1_figures_and_cost(quick):
     assert len(figs) == 7 and all(f.stat().st_size > 10_000 for f in figs)
     for f in figs:
         assert f"report_figures/{f.name}" in text
+
+
+def _lammps_table(mu_s: float, inertial: float) -> pl.DataFrame:
+    """A benchmarks/lammps_rate_cell.py table.parquet of one point (every quantity agrees)."""
+    rows = [{"mu_s": mu_s, "I": inertial, "quantity": q, "granflow": 0.5, "granflow_se": 0.01,
+             "lammps": 0.51, "lammps_se": 0.01, "z": -0.71, "verdict": "agrees",
+             "replicas_granflow": 3, "replicas_lammps": 3}
+            for q in ("mu", "phi", "N1_p", "N2_p", "syy_pext")]
+    return pl.from_dicts(rows)
+
+
+def test_the_protocol_section_shows_each_pressure_and_the_codes_shift(tmp_path):
+    """The LAMMPS tables at both pressures and the shift table enter the report section; a
+    shift both codes make beyond 2 SEs is named, one where they part is counted apart."""
+    from granflow.studies.reproduce_002_report import protocol_checks
+
+    out = tmp_path / "reproduce_002"
+    out.mkdir()
+    assert protocol_checks(out) == []  # nothing beside the dataset: no section
+    high, low = tmp_path / "lammps_rate_cell", tmp_path / "lammps_rate_cell_p1e-5"
+    high.mkdir()
+    low.mkdir()
+    _lammps_table(0.0, 0.05).write_parquet(high / "table.parquet")
+    _lammps_table(0.0, 0.05).write_parquet(low / "table.parquet")
+    pl.from_dicts([
+        {"mu_s": 0.0, "I": 0.05, "quantity": "phi", "shift_granflow": 0.003,
+         "shift_granflow_se": 0.0003, "z_granflow": 10.0, "shift_lammps": 0.0028,
+         "shift_lammps_se": 0.0003, "z_lammps": 9.3, "codes_z": 0.47, "codes": "shift alike"},
+        {"mu_s": 0.0, "I": 0.05, "quantity": "mu", "shift_granflow": 0.004,
+         "shift_granflow_se": 0.001, "z_granflow": 4.0, "shift_lammps": -0.001,
+         "shift_lammps_se": 0.001, "z_lammps": -1.0, "codes_z": 3.5, "codes": "shift apart"},
+    ]).write_parquet(low / "shift.parquet")
+    text = "\n".join(protocol_checks(out))
+    assert "granflow against LAMMPS at p_ext = 1e-04" in text
+    assert "granflow against LAMMPS at p_ext = 1e-05" in text
+    assert "--p-ext 1e-05 --mu 0 --I 0.05 --seeds 1 2 3 --only-table" in text
+    assert "phi at mu_s = 0, I = 0.05 (+0.0030 and +0.0028)" in text  # both codes moved
+    assert "mu at mu_s = 0, I = 0.05" not in text  # only granflow moved: not named
+    assert "agree within 2 combined SEs in 1 of 2" in text
+    assert "| shift apart |" in text

@@ -67,7 +67,9 @@ def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame,
             f"with the pressure, {np.ptp(v) / np.abs(v).mean():.0%} of its size: where the "
             "offset is larger than that, it is not a pressure effect, and fitting over "
             "002's three pressures does not remove it (the pressures' own differences: "
-            "'Pressure collapse' above).")
+            "'Pressure collapse' above" + ("; whether LAMMPS shifts alike at the same I: "
+                                          "'This code, or the protocol?' below)."
+                                          if checked else ")."))
     bad = curves.filter(pl.col("verdict") != "agrees") if curves.height else curves
     if curves.height:
         lines.append(
@@ -109,6 +111,10 @@ def discussion(off: pl.DataFrame, curves: pl.DataFrame, rows: pl.DataFrame,
 #: the rate-controlled cell at matched I (benchmarks/rate_cell.py equivalence)
 LAMMPS_TABLE = ("lammps_rate_cell", "table.parquet")
 EQUIVALENCE_TABLE = ("rate_cell", "equivalence.parquet")
+#: the same comparison at 002's lower pressures, and each code's change from p_ext = 1e-4 to
+#: them (``--p-ext P --reference``): whether the campaign's pressure dependence at the same
+#: stress ratio is the particles' stiffness (both codes shift) or this code (granflow alone)
+LAMMPS_LOW_P = (("lammps_rate_cell_p1e-5", 1e-5), ("lammps_rate_cell_p1e-6", 1e-6))
 
 
 def _pm_column(value: str, se: str, name: str) -> pl.Expr:
@@ -131,28 +137,79 @@ def _agreement(intro: str, table: pl.DataFrame, shown: pl.DataFrame,
             md_table(shown, fmt), ""]
 
 
+def _seeds(table: pl.DataFrame) -> str:
+    """The seeds a LAMMPS table was built from, as on the command line (1 to the most
+    replicas of a point; a seed a point lacks is skipped there)."""
+    most = int(table["replicas_granflow"].max())  # type: ignore[arg-type]
+    return " ".join(str(k) for k in range(1, most + 1))
+
+
+def _lammps_lines(t: pl.DataFrame, where: Path, p_ext: float) -> list[str]:
+    """The granflow-against-LAMMPS table at ``p_ext`` (benchmarks/lammps_rate_cell.py's
+    table.parquet in ``where``) as report lines."""
+    p_arg = "" if p_ext == P_MAIN else f" --p-ext {p_ext:g}"
+    return _agreement(
+        f"**granflow against LAMMPS at p_ext = {p_ext:.0e}** on one protocol, from the same "
+        "states: the rate-controlled cell (granflow.scenes.RateCell, sigma_yy held at p_ext, x "
+        "and z fixed; N = 2000) handed at the switch to LAMMPS's `fix deform/pressure` with "
+        "`gran/hooke/history` (benchmarks/lammps_rate_cell.py; each I's run length in "
+        f"benchmarks/NOTES.md; `python benchmarks/lammps_rate_cell.py{p_arg} --mu "
+        f"{_listed(t['mu_s'])} --I {_listed(t['I'])} --seeds {_seeds(t)} --only-table --out "
+        f"{where.as_posix()}` rebuilds the table from the committed series); mu = "
+        "|sigma_xy|/sigma_yy, N1, N2 over p; replica means of the seeds, z = difference over "
+        "the combined SE.", t,
+        t.select("mu_s", "I", "quantity", pl.col("replicas_granflow").alias("seeds"),
+                 _pm_column("granflow", "granflow_se", "granflow"),
+                 _pm_column("lammps", "lammps_se", "LAMMPS"), "z", "verdict"),
+        {"mu_s": "g", "I": "g", "z": "+.2f"})
+
+
+def _shift_lines(shift: pl.DataFrame, where: Path, p_ext: float, reference: Path,
+                 seeds: str) -> list[str]:
+    """Each code's change from p_ext = 1e-4 to ``p_ext`` at the same I (shift.parquet in
+    ``where``) as report lines: the stiffness check of the pressure collapse."""
+    real = shift.filter(pl.col("quantity") != "syy_pext")
+    both = real.filter((pl.col("z_granflow").abs() > 2) & (pl.col("z_lammps").abs() > 2))
+    alike = int((real["codes"] == "shift alike").sum())
+    moved = ", ".join(f"{r['quantity']} at mu_s = {r['mu_s']:g}, I = {r['I']:g} "
+                      f"({r['shift_granflow']:+.4f} and {r['shift_lammps']:+.4f})"
+                      for r in both.iter_rows(named=True)) or "none"
+    return [f"**The pressure dependence, in both codes.** Each code's change from p_ext = "
+            f"{P_MAIN:.0e} to {p_ext:.0e} at the same imposed I, replica means of each "
+            "pressure's seeds, each run from its own compacted state (`python "
+            f"benchmarks/lammps_rate_cell.py --p-ext {p_ext:g} --mu {_listed(shift['mu_s'])} "
+            f"--I {_listed(shift['I'])} "
+            f"--seeds {seeds} --only-table --out {where.as_posix()} --reference "
+            f"{reference.as_posix()}`). Moved beyond 2 SEs in both codes (granflow, LAMMPS): "
+            f"{moved}. The two codes' shifts agree within 2 combined SEs in {alike} of "
+            f"{real.height} (codes z = granflow's shift less LAMMPS's over their combined "
+            "SE): a shift both codes make comes from the particles' stiffness p d/kn, not "
+            "from this code.", "",
+            md_table(real.select(
+                "mu_s", "I", "quantity",
+                _pm_column("shift_granflow", "shift_granflow_se", "granflow shift"),
+                _pm_column("shift_lammps", "shift_lammps_se", "LAMMPS shift"),
+                "codes_z", "codes"), {"mu_s": "g", "I": "g", "codes_z": "+.2f"}), ""]
+
+
 def protocol_checks(out: Path) -> list[str]:
     """The section on whether the offsets are this code's or the protocol's, from the tables
     beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE); empty when neither is there."""
     lmp, eq = (out.parent.joinpath(*t) for t in (LAMMPS_TABLE, EQUIVALENCE_TABLE))
+    lows = [(out.parent / name, p) for name, p in LAMMPS_LOW_P]
     if not (lmp.exists() or eq.exists()):
         return []
     lines = ["## This code, or the protocol?", ""]
     if lmp.exists():
-        t = pl.read_parquet(lmp)
-        lines += _agreement(
-            "**granflow against LAMMPS** on one protocol, from the same states: the "
-            "rate-controlled cell (granflow.scenes.RateCell, sigma_yy held at p_ext, x and z "
-            "fixed; N = 2000, p_ext = 1e-4) handed at the switch to LAMMPS's `fix "
-            "deform/pressure` with `gran/hooke/history` (benchmarks/lammps_rate_cell.py; "
-            "each I's run length in benchmarks/NOTES.md; `python "
-            f"benchmarks/lammps_rate_cell.py --mu {_listed(t['mu_s'])} --I {_listed(t['I'])} "
-            f"--seeds 1 2 3 --only-table --out {lmp.parent.as_posix()}` rebuilds the table from "
-            "the committed series); mu = |sigma_xy|/sigma_yy, N1, N2 over p; replica means of "
-            "the seeds, z = difference over the combined SE.", t,
-            t.select("mu_s", "I", "quantity", _pm_column("granflow", "granflow_se", "granflow"),
-                     _pm_column("lammps", "lammps_se", "LAMMPS"), "z", "verdict"),
-            {"mu_s": "g", "I": "g", "z": "+.2f"})
+        lines += _lammps_lines(pl.read_parquet(lmp), lmp.parent, P_MAIN)
+    for low, p in lows:
+        if (low / "table.parquet").exists():
+            lines += _lammps_lines(pl.read_parquet(low / "table.parquet"), low, p)
+        if (low / "shift.parquet").exists():
+            seeds = (_seeds(pl.read_parquet(low / "table.parquet"))
+                     if (low / "table.parquet").exists() else "1 2 3")
+            lines += _shift_lines(pl.read_parquet(low / "shift.parquet"), low, p, lmp.parent,
+                                  seeds)
     if eq.exists():
         e = pl.read_parquet(eq)
         lines += _agreement(
@@ -164,9 +221,12 @@ def protocol_checks(out: Path) -> list[str]:
                      _pm_column("stress", "stress_se", "stress-controlled"),
                      _pm_column("rate", "rate_se", "rate-controlled"), "z", "verdict"),
             {"mu_s": "g", "tau_ratio": "g", "I": ".3f", "z": "+.2f"})
+    where = ("p_ext = 1e-4; the stress/rate check was run there only"
+             if any(low.exists() for low, _ in lows)
+             else "p_ext = 1e-4; the checks were run there only")
     lines += ["Where both agree, the offsets from 002's laws found above are neither this "
-              "code's nor the protocol's at those points (p_ext = 1e-4; the checks were run "
-              "there only); what remains is 002's set-up.", ""]
+              f"code's nor the protocol's at those points ({where}); what remains is 002's "
+              "set-up.", ""]
     return lines
 
 
@@ -736,8 +796,8 @@ def _remaining(points: pl.DataFrame, plan: Any, rate: float) -> list[str]:
     total = sum(h for _, h in by_p.values())
     return [f"Not yet run: {len(left)} points of the {plan.name} plan: {parts}; about "
             f"{total:.0f} core-hours in all (`python -m granflow.studies.reproduce_002 "
-            f"--{plan.name} --out DATASET --workers 2` goes on with them; committed in "
-            "pieces).", ""]
+            f"--{plan.name} --out DATASET --workers 2 --threads 1` goes on with them, two "
+            "points at a time, one core each; committed in pieces).", ""]
 
 
 def _pressures(pool: pl.DataFrame, n: int) -> str:
