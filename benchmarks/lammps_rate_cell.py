@@ -45,7 +45,9 @@ What it does, per point (mu_s, I) and seed (N = 2000, p_ext a/kn = 1e-4, normal 
    (``granflow.analysis.stats.blocking``) of the per-sample ratios mu = -sigma_xy/sigma_yy
    (= |sigma_xy|/sigma_yy while sigma_xy < 0), N1/p = (sigma_xx - sigma_yy)/p,
    N2/p = (sigma_yy - sigma_zz)/p with p = tr(sigma)/3, of phi, and of sigma_yy/p_ext (the
-   controller check: 1 within its SE in both codes).
+   controller check: 1 within its SE in both codes). LAMMPS's sigma_xx is taken without the
+   box slip's kinetic term (without_slip, box_slip: its dilating box slides past the
+   material, which temp/deform reads as x velocity fluctuation).
 5. Per point: the replicas' means (``granflow.analysis.replicas.replica_mean``, all seeds) of
    each code, and per quantity granflow - LAMMPS, its combined SE sqrt(se_g^2 + se_l^2), z and
    the verdict ("agrees" if |z| <= 2). Printed and written to OUT/table.parquet (the per-run
@@ -347,6 +349,16 @@ def derived(df: pl.DataFrame, p_ext: float) -> pl.DataFrame:
     )
 
 
+def without_slip(df: pl.DataFrame, ho: dict[str, Any]) -> pl.DataFrame:
+    """A LAMMPS series with the box slip's kinetic term taken out of sigma_xx (box_slip):
+    rho phi dv^2 with dv = RATE (l_y - l_y0)/2, the lower face's displacement when the box
+    dilates about its centre (measured: the end states' mean slip matches it within 0.002
+    RATE l_y, benchmarks/NOTES.md). Without it LAMMPS's N1/p reads the material's uniform
+    slide past the box's stream as normal stress (+0.016-0.021 at I = 0.15)."""
+    dv = ho["rate"] * (pl.col("ly") - ho["H"][1][1]) / 2.0
+    return df.with_columns(pl.col("sigma_xx") - ho["density"] * pl.col("phi") * dv**2)
+
+
 def run_stats(df: pl.DataFrame, p_ext: float, drop: float) -> dict[str, Any]:
     """Steady start (MSER on phi, p, mu; at least ``drop`` of the run) and each quantity's
     mean and blocking SE over the steady part."""
@@ -376,7 +388,12 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
                     if not f.exists():
                         continue
                     row = {"code": code, "mu_s": mu_s, "I": inertial, "seed": seed}
-                    row.update(run_stats(pl.read_parquet(f), P_EXT, drop))
+                    df = pl.read_parquet(f)
+                    if code == "lammps":
+                        meta = series_path(out, "granflow", mu_s, inertial, seed)
+                        df = without_slip(df, json.loads(
+                            meta.with_suffix(".json").read_text())["handoff"])
+                    row.update(run_stats(df, P_EXT, drop))
                     runs.append(row)
     if not runs:
         return pl.DataFrame(), pl.DataFrame()
@@ -464,6 +481,35 @@ def print_table(table: pl.DataFrame) -> None:
               f"{r['granflow']:>11.5f} ± {r['granflow_se']:<7.5f} "
               f"{r['lammps']:>11.5f} ± {r['lammps_se']:<7.5f} {r['diff']:>+10.5f} "
               f"{r['z']:>+6.2f}  {r['verdict']}")
+
+
+def box_slip(out: Path) -> pl.DataFrame:
+    """LAMMPS's material against its box's streaming profile at the end of each run (from
+    OUT/lammps/<run>/end.data, where kept): the mass-weighted mean of v_x - RATE (y - ylo),
+    over RATE l_y, against -(l_y - l_y0)/(2 l_y), the lower face's displacement if the box
+    dilated about its centre. ``fix deform/pressure`` with ``remap v`` moves the faces without
+    moving the particles, so the stream that ``compute temp/deform`` subtracts (from the lower
+    face) slides past the material by RATE times the face's displacement, and the "peculiar"
+    velocities keep that uniform offset dv: the kinetic sigma_xx gains rho phi dv^2 (the
+    ``n1_bias`` column, over p_ext); sigma_xy and sigma_yy do not (the mean v'_y is zero).
+    granflow's breathing is affine (positions move with the stream), so it has none."""
+    rows = []
+    for end in sorted((out / "lammps").glob("*/end.data")):
+        name = end.parent.name
+        meta = series_path(out, "granflow", 0.0, 0.0, 0).parent / f"granflow_{name}.json"
+        if not meta.exists():
+            continue
+        ho = json.loads(meta.read_text())["handoff"]
+        d = lp.read_data(end)
+        lo, hi = d["box_lo"], d["box_hi"]
+        ly, m = hi[1] - lo[1], d["mass"]
+        dv = float(np.sum(m * (d["v"][:, 0] - ho["rate"] * (d["x"][:, 1] - lo[1]))) / m.sum())
+        vol = float(np.prod(hi - lo))
+        rows.append({"run": name, "rate": ho["rate"], "l_y0": ho["H"][1][1], "l_y": ly,
+                     "slip": dv / (ho["rate"] * ly),
+                     "slip_from_dilation": -(ly - ho["H"][1][1]) / (2 * ly),
+                     "n1_bias": float(m.sum()) / vol * dv**2 / ho["p_ext"]})
+    return pl.from_dicts(rows) if rows else pl.DataFrame()
 
 
 def thin_series(out: Path, k: int) -> int:
@@ -591,6 +637,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--reference", default=None,
                     help="another pressure's OUT (its runs.parquet): print and write "
                          "OUT/shift.parquet, each code's change from it (shift_table)")
+    ap.add_argument("--slip", action="store_true",
+                    help="print and write OUT/slip.parquet: LAMMPS's material against its "
+                         "box's stream at each run's end (box_slip)")
     ap.add_argument("--thin", type=int, default=None,
                     help="keep every K-th sample of the series in OUT not thinned before, "
                          "then build the table (thin_series; for committing low-pressure runs)")
@@ -623,6 +672,15 @@ def main(argv: list[str] | None = None) -> None:
     if not table.is_empty():
         table.write_parquet(out / "table.parquet")
         print(f"wrote {out / 'table.parquet'}")
+    if a.slip:
+        slip = box_slip(out)
+        if slip.is_empty():
+            print("no LAMMPS end state (OUT/lammps/<run>/end.data) to measure the slip on")
+        else:
+            with pl.Config(tbl_rows=100, tbl_width_chars=200, float_precision=4):
+                print(slip)
+            slip.write_parquet(out / "slip.parquet")
+            print(f"wrote {out / 'slip.parquet'}")
     if a.reference is not None and not runs.is_empty():
         ref = pl.read_parquet(Path(a.reference) / "runs.parquet")
         shift = shift_table(runs, ref)

@@ -25,8 +25,16 @@ from granflow.continuum.channel_model import (
     channel_cases,
     predict,
 )
+from granflow.continuum.verdict import (
+    PHI_TARGET,
+    U_TARGET,
+    WIDE,
+    answer,
+    verdict_table,
+    zone_errors,
+)
 
-from ._campaign import md_table
+from ._campaign import md_table, pm
 from ._campaign.cell import channel_material
 
 MODELS = ("local", "nonlocal")
@@ -355,6 +363,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     pred.residuals.write_parquet(out / "residuals.parquet")
     pred.boundary.write_parquet(out / "boundary.parquet")
     pred.dem_phi.write_parquet(out / "dem_phi.parquet")
+    verdicts = verdict_table(zone_errors(channel_cases(channel), pred.profiles))
+    verdicts.write_parquet(out / "verdict.parquet")
     figdir = path.parent / f"{path.stem}_figures"
     rel = path.parent
     figs = [plot_law(pred, figdir / "law.png")]
@@ -388,7 +398,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         f"('{out}/model.parquet')` and `granflow.continuum.channel_model.predict_channel`; "
         "the comparison is `cases.parquet` (one row "
         "per channel run), `compare.parquet` (misfit per zone), `model_profiles.parquet`, "
-        "`residuals.parquet`, `boundary.parquet` and `dem_phi.parquet` beside them. Channel "
+        "`residuals.parquet`, `boundary.parquet`, `dem_phi.parquet` and `verdict.parquet` "
+        "beside them. Channel "
         "data: "
         f"`{channel}/points.parquet` and `profiles.parquet` (the reproduce_000 campaign, kn = "
         "1e5).", "",
@@ -462,6 +473,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "Misfit per zone (zones as reproduce_000 labels them):", "",
         md_table(_zone_table(pred.zones), {"phi_bar": ".2f"}), "",
         "## What works and what does not", "", *findings(pred), "",
+        *verdict_lines(verdicts),
         "## Where the boundary data are taken", "",
         "The nonlocal model with its boundary data (u and the fluidity) from bin k instead of "
         "the wall bin; A refitted on the reference run for each k, the misfits over the bins "
@@ -490,6 +502,35 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def verdict_lines(table: pl.DataFrame) -> list[str]:
+    """The verdict section (issue 37, item 5): per width, model and zone the worst run's
+    misfits with their SEs against the targets (granflow.continuum.verdict), and the answer."""
+    if not table.height:
+        return []
+    shown = table.select(
+        "W", "model", "zone", "runs",
+        pl.struct("u_rel", "u_rel_se").map_elements(
+            lambda r: pm(r["u_rel"], r["u_rel_se"], 3), return_dtype=pl.String
+        ).alias("u - u_slip misfit (worst run)"),
+        "u",
+        pl.struct("phi_abs", "phi_abs_se").map_elements(
+            lambda r: pm(r["phi_abs"], r["phi_abs_se"], 4), return_dtype=pl.String
+        ).alias("phi misfit (worst run)"),
+        "phi")
+    return ["## 5. The verdict", "",
+            f"The issue's target: one set of constants, fitted once, predicts every wide run "
+            f"(W >= {WIDE:g}) within {U_TARGET:.0%} of u_max - u_slip in u - u_slip and "
+            f"within {PHI_TARGET:g} in phi outside the plug. Per width, model and zone, the "
+            "worst run (largest misfit less 2 SEs): the RMS misfit over the zone's bins with "
+            "its SE, propagated from the calibration band (16-84 %, as the SE of the model) "
+            "and the DEM bins' SEs (granflow.continuum.verdict); 'within' if misfit + 2 SE "
+            "is under the target, 'outside' if misfit - 2 SE is over it, else 'at the "
+            "target'. The plug has no phi verdict (the models carry the cell's critical "
+            "state there).", "",
+            f"**Does a cell calibration predict the channel? {answer(table)}**", "",
+            md_table(shown, {"W": "g"}), ""]
 
 
 def _points_table(pooled: pl.DataFrame) -> pl.DataFrame:

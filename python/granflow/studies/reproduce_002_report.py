@@ -156,8 +156,10 @@ def _lammps_lines(t: pl.DataFrame, where: Path, p_ext: float) -> list[str]:
         f"benchmarks/NOTES.md; `python benchmarks/lammps_rate_cell.py{p_arg} --mu "
         f"{_listed(t['mu_s'])} --I {_listed(t['I'])} --seeds {_seeds(t)} --only-table --out "
         f"{where.as_posix()}` rebuilds the table from the committed series); mu = "
-        "|sigma_xy|/sigma_yy, N1, N2 over p; replica means of the seeds, z = difference over "
-        "the combined SE.", t,
+        "|sigma_xy|/sigma_yy, N1, N2 over p (LAMMPS's sigma_xx without the kinetic term of "
+        "its dilating box sliding past the material, measured in benchmarks/NOTES.md: up to "
+        "+0.02 in N1/p at I = 0.15); replica means of the seeds, z = difference over the "
+        "combined SE.", t,
         t.select("mu_s", "I", "quantity", pl.col("replicas_granflow").alias("seeds"),
                  _pm_column("granflow", "granflow_se", "granflow"),
                  _pm_column("lammps", "lammps_se", "LAMMPS"), "z", "verdict"),
