@@ -1,11 +1,11 @@
-"""Does a cell calibration predict the channel? (issue 37, item 5.) Per run, model and zone,
-the misfit of u - u_slip (relative to the DEM's u_max - u_slip) and of phi, each with its
-uncertainty; per width and zone the worst run against the targets; and the one-line answer
-for the wide runs.
+"""Does a cell calibration predict the channel? Per run, model and zone, the misfit of
+u - u_slip (relative to the DEM's u_max - u_slip) and of phi, each with its uncertainty; per
+width and zone the worst run against the targets; and the one-line answer for the wide runs.
 
-Targets (the issue's): u - u_slip within ``U_TARGET`` = 10 % of u_max - u_slip in every
-zone, phi within ``PHI_TARGET`` = 0.01 outside the plug (the models carry the cell's
-critical-state phi into the plug, which no phi(I) law can compact: docs/cross_scene.md).
+Targets (the cross-scene study's): u - u_slip within ``U_TARGET`` = 10 % of u_max - u_slip
+in every zone, phi within ``PHI_TARGET`` = 0.01 outside the plug (the models carry the
+cell's critical-state phi into the plug, which no phi(I) law can compact:
+docs/cross_scene.md).
 
 Uncertainty of a misfit e = sqrt(mean r_i^2), r_i the residual of bin i: linear propagation,
 se(e)^2 = sum_i (r_i / (n e))^2 (s_model,i^2 + s_dem,i^2), with s_model the half-width of
@@ -27,11 +27,11 @@ import polars as pl
 
 from ._checks import FloatArray, bad
 
-#: u - u_slip within this fraction of u_max - u_slip (issue 37's target)
+#: u - u_slip within this fraction of u_max - u_slip (the cross-scene target)
 U_TARGET = 0.10
-#: phi within this, outside the plug (issue 37's target)
+#: phi within this, outside the plug (the cross-scene target)
 PHI_TARGET = 0.01
-#: the runs the target is set for: W >= WIDE (issue 37: "every wide run (W >= 60)")
+#: the runs the target is set for: W >= WIDE ("every wide run")
 WIDE = 60.0
 #: a verdict's margin, in SEs of the misfit
 SIGMAS = 2.0
