@@ -196,7 +196,8 @@ def _shift_lines(shift: pl.DataFrame, where: Path, p_ext: float, reference: Path
 
 def protocol_checks(out: Path) -> list[str]:
     """The section on whether the offsets are this code's or the protocol's, from the tables
-    beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE); empty when neither is there."""
+    beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE, and LAMMPS_LOW_P's tables and
+    shifts where present); empty when neither of the first two is there."""
     lmp, eq = (out.parent.joinpath(*t) for t in (LAMMPS_TABLE, EQUIVALENCE_TABLE))
     lows = [(out.parent / name, p) for name, p in LAMMPS_LOW_P]
     if not (lmp.exists() or eq.exists()):
