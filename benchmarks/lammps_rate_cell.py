@@ -376,6 +376,20 @@ def run_stats(df: pl.DataFrame, p_ext: float, drop: float) -> dict[str, Any]:
     return row
 
 
+def _both_codes(g: pl.DataFrame) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """granflow's and LAMMPS's rows of one group (a point, or a point and quantity); None
+    unless both codes are there."""
+    by = {r["code"]: r for r in g.iter_rows(named=True)}
+    return (by["granflow"], by["lammps"]) if all(c in by for c in CODES) else None
+
+
+def granflow_handoff(out: Path, name: str) -> dict[str, Any]:
+    """The hand-off facts (rate, dt, H at the switch, p_ext, density, ...) of run ``name``
+    (point_name), from its granflow series' .json."""
+    meta = out / "series" / f"granflow_{name}.json"
+    return dict(json.loads(meta.read_text())["handoff"])
+
+
 def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: list[int],
                  drop: float) -> tuple[pl.DataFrame, pl.DataFrame]:
     """Per-run statistics of every series present, and the per-point comparison table."""
@@ -390,9 +404,8 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
                     row = {"code": code, "mu_s": mu_s, "I": inertial, "seed": seed}
                     df = pl.read_parquet(f)
                     if code == "lammps":
-                        meta = series_path(out, "granflow", mu_s, inertial, seed)
-                        df = without_slip(df, json.loads(
-                            meta.with_suffix(".json").read_text())["handoff"])
+                        df = without_slip(df, granflow_handoff(
+                            out, point_name(mu_s, inertial, seed)))
                     row.update(run_stats(df, P_EXT, drop))
                     runs.append(row)
     if not runs:
@@ -401,10 +414,10 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
     rep = replica_mean(rdf, ["code", "mu_s", "I"], list(QUANTITIES))
     rows = []
     for (mu_s, inertial), g in rep.group_by(["mu_s", "I"], maintain_order=True):
-        by = {r["code"]: r for r in g.iter_rows(named=True)}
-        if not all(c in by for c in CODES):
+        pair = _both_codes(g)
+        if pair is None:
             continue
-        gf, lm = by["granflow"], by["lammps"]
+        gf, lm = pair
         for q in QUANTITIES:
             diff, se, z = difference_z(gf[q], gf[f"{q}_se"], lm[q], lm[f"{q}_se"])
             rows.append({
@@ -443,10 +456,10 @@ def shift_table(runs: pl.DataFrame, reference: pl.DataFrame) -> pl.DataFrame:
     tab = pl.from_dicts(rows)
     out = []
     for (mu_s, inertial, q), g in tab.group_by(["mu_s", "I", "quantity"], maintain_order=True):
-        by = {r["code"]: r for r in g.iter_rows(named=True)}
-        if not all(c in by for c in CODES):
+        pair = _both_codes(g)
+        if pair is None:
             continue
-        gf, lm = by["granflow"], by["lammps"]
+        gf, lm = pair
         _, _, cz = difference_z(gf["shift"], gf["shift_se"], lm["shift"], lm["shift_se"])
         out.append({"mu_s": mu_s, "I": inertial, "quantity": q,
                     "shift_granflow": gf["shift"], "shift_granflow_se": gf["shift_se"],
@@ -496,10 +509,9 @@ def box_slip(out: Path) -> pl.DataFrame:
     rows = []
     for end in sorted((out / "lammps").glob("*/end.data")):
         name = end.parent.name
-        meta = series_path(out, "granflow", 0.0, 0.0, 0).parent / f"granflow_{name}.json"
-        if not meta.exists():
+        if not (out / "series" / f"granflow_{name}.json").exists():
             continue
-        ho = json.loads(meta.read_text())["handoff"]
+        ho = granflow_handoff(out, name)
         d = lp.read_data(end)
         lo, hi = d["box_lo"], d["box_hi"]
         ly, m = hi[1] - lo[1], d["mass"]

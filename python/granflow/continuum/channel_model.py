@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import polars as pl
 
 from granflow.analysis.channel import delta_095_profile
@@ -232,6 +233,19 @@ def fit_amplitude(law: LocalLaw, case: ChannelCase, k: int = 0, phi: str = "mode
     return float(10**r.x)
 
 
+def zone_bins(profile: pl.DataFrame) -> dict[str, npt.NDArray[np.int64]]:
+    """The bin indices of each zone of a DEM half profile (its ``zone`` column), in ZONES
+    order, zones without bins left out; the wall zone without its first bin (the models'
+    boundary data): the bins every per-zone misfit is taken over."""
+    zones = profile["zone"].to_list()
+    out = {}
+    for zone in ZONES:
+        idx = np.array([i for i, z in enumerate(zones) if z == zone and i > 0], dtype=np.int64)
+        if idx.size:
+            out[zone] = idx
+    return out
+
+
 def zone_misfits(case: ChannelCase, prof: Profile, model: str) -> list[dict[str, Any]]:
     """Per zone of the DEM profile: RMS misfit of u - u_slip (relative to u_max - u_slip),
     of log10 |du/dx| (each floored at 1e-6, the local plug's zero) and of phi; the wall
@@ -242,10 +256,7 @@ def zone_misfits(case: ChannelCase, prof: Profile, model: str) -> list[dict[str,
     u, gd, phi = (t[c].to_numpy() for c in ("u", "gamma_dot", "phi"))
     span = u[-1] - u[0]
     rows = []
-    for zone in ZONES:
-        idx = np.array([i for i, z in enumerate(t["zone"].to_list()) if z == zone and i > 0])
-        if idx.size == 0:
-            continue
+    for zone, idx in zone_bins(t).items():
         lg = np.log10(np.maximum(m["dudx"][idx], 1e-6)) - np.log10(
             np.maximum(np.abs(gd[idx]), 1e-6))
         rows.append({"W": case.W, "phi_bar": case.phi_bar, "model": model, "zone": zone,

@@ -26,6 +26,7 @@ import numpy as np
 import polars as pl
 
 from ._checks import FloatArray, bad
+from .channel_model import zone_bins
 
 #: u - u_slip within this fraction of u_max - u_slip (the cross-scene target)
 U_TARGET = 0.10
@@ -80,7 +81,7 @@ def zone_errors(cases: Sequence[Any], profiles: pl.DataFrame) -> pl.DataFrame:
     (``phi_abs``) with their SEs (module docstring). ``cases``: the runs
     (:class:`granflow.continuum.channel_model.ChannelCase`: the DEM's bins with SEs and
     zones); ``profiles``: the models at those bins with their bands (a ChannelPrediction's
-    ``profiles``). The wall zone leaves out its first bin (the boundary data)."""
+    ``profiles``). The bins of each zone are :func:`channel_model.zone_bins`'s."""
     rows = []
     for case in cases:
         t = case.profile
@@ -88,7 +89,6 @@ def zone_errors(cases: Sequence[Any], profiles: pl.DataFrame) -> pl.DataFrame:
         u_se = t["u_se"].to_numpy() if "u_se" in t.columns else np.zeros(t.height)
         phi_se = t["phi_se"].to_numpy() if "phi_se" in t.columns else np.zeros(t.height)
         span = u[-1] - u[0]
-        zones = t["zone"].to_list()
         sel = (pl.col("W") == case.W) & (pl.col("phi_bar") == case.phi_bar)
         if case.seed is not None and "seed" in profiles.columns:
             sel = sel & (pl.col("seed") == case.seed)
@@ -99,10 +99,7 @@ def zone_errors(cases: Sequence[Any], profiles: pl.DataFrame) -> pl.DataFrame:
                           f"the DEM run's {t.height} bins")
             du, mphi = m["du"].to_numpy(), m["phi"].to_numpy()
             s_du, s_phi = _half_band(m, "du"), _half_band(m, "phi")
-            for zone in dict.fromkeys(zones):
-                idx = np.array([i for i, z in enumerate(zones) if z == zone and i > 0])
-                if idx.size == 0:
-                    continue
+            for zone, idx in zone_bins(t).items():
                 eu, su = misfit_with_error(
                     (du[idx] - (u[idx] - u[0])) / span,
                     np.sqrt(s_du[idx] ** 2 + u_se[idx] ** 2 + u_se[0] ** 2) / abs(span))

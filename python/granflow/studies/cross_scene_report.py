@@ -34,7 +34,7 @@ from granflow.continuum.verdict import (
     zone_errors,
 )
 
-from ._campaign import md_table, pm
+from ._campaign import md_table, pm_column
 from ._campaign.cell import channel_material
 
 MODELS = ("local", "nonlocal")
@@ -505,20 +505,14 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
 
 
 def verdict_lines(table: pl.DataFrame) -> list[str]:
-    """The verdict section (issue 37, item 5): per width, model and zone the worst run's
+    """The verdict section: per width, model and zone the worst run's
     misfits with their SEs against the targets (granflow.continuum.verdict), and the answer."""
     if not table.height:
         return []
     shown = table.select(
         "W", "model", "zone", "runs",
-        pl.struct("u_rel", "u_rel_se").map_elements(
-            lambda r: pm(r["u_rel"], r["u_rel_se"], 3), return_dtype=pl.String
-        ).alias("u - u_slip misfit (worst run)"),
-        "u",
-        pl.struct("phi_abs", "phi_abs_se").map_elements(
-            lambda r: pm(r["phi_abs"], r["phi_abs_se"], 4), return_dtype=pl.String
-        ).alias("phi misfit (worst run)"),
-        "phi")
+        pm_column("u_rel", "u_rel_se", "u - u_slip misfit (worst run)", 3), "u",
+        pm_column("phi_abs", "phi_abs_se", "phi misfit (worst run)"), "phi")
     return ["## 5. The verdict", "",
             f"The issue's target: one set of constants, fitted once, predicts every wide run "
             f"(W >= {WIDE:g}) within {U_TARGET:.0%} of u_max - u_slip in u - u_slip and "

@@ -18,7 +18,15 @@ from granflow.analysis.compare import AGREE_SIGMA, agrees, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.replicas import DISAGREE_P, replica_mean
 
-from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
+from ._campaign import (
+    cost,
+    dask_recipe,
+    md_table,
+    paper_scale_estimate,
+    plot_campaign_se,
+    pm,
+    pm_column,
+)
 from .reproduce_002_figures import plot_figures
 
 #: the laws' parameters, in the order of the report's table
@@ -117,12 +125,6 @@ EQUIVALENCE_TABLE = ("rate_cell", "equivalence.parquet")
 LAMMPS_LOW_P = (("lammps_rate_cell_p1e-5", 1e-5), ("lammps_rate_cell_p1e-6", 1e-6))
 
 
-def _pm_column(value: str, se: str, name: str) -> pl.Expr:
-    """The column ``name``: ``value ± se`` as text (4 decimals)."""
-    return pl.struct(value, se).map_elements(lambda r: pm(r[value], r[se], 4),
-                                             return_dtype=pl.String).alias(name)
-
-
 def _listed(col: pl.Series) -> str:
     """The distinct values of ``col``, space-separated as on a command line."""
     return " ".join(f"{v:g}" for v in sorted(set(col.to_list())))
@@ -161,8 +163,8 @@ def _lammps_lines(t: pl.DataFrame, where: Path, p_ext: float) -> list[str]:
         "+0.02 in N1/p at I = 0.15); replica means of the seeds, z = difference over the "
         "combined SE.", t,
         t.select("mu_s", "I", "quantity", pl.col("replicas_granflow").alias("seeds"),
-                 _pm_column("granflow", "granflow_se", "granflow"),
-                 _pm_column("lammps", "lammps_se", "LAMMPS"), "z", "verdict"),
+                 pm_column("granflow", "granflow_se", "granflow"),
+                 pm_column("lammps", "lammps_se", "LAMMPS"), "z", "verdict"),
         {"mu_s": "g", "I": "g", "z": "+.2f"})
 
 
@@ -189,8 +191,8 @@ def _shift_lines(shift: pl.DataFrame, where: Path, p_ext: float, reference: Path
             "from this code.", "",
             md_table(real.select(
                 "mu_s", "I", "quantity",
-                _pm_column("shift_granflow", "shift_granflow_se", "granflow shift"),
-                _pm_column("shift_lammps", "shift_lammps_se", "LAMMPS shift"),
+                pm_column("shift_granflow", "shift_granflow_se", "granflow shift"),
+                pm_column("shift_lammps", "shift_lammps_se", "LAMMPS shift"),
                 "codes_z", "codes"), {"mu_s": "g", "I": "g", "codes_z": "+.2f"}), ""]
 
 
@@ -206,13 +208,13 @@ def protocol_checks(out: Path) -> list[str]:
     if lmp.exists():
         lines += _lammps_lines(pl.read_parquet(lmp), lmp.parent, P_MAIN)
     for low, p in lows:
-        if (low / "table.parquet").exists():
-            lines += _lammps_lines(pl.read_parquet(low / "table.parquet"), low, p)
+        t = (pl.read_parquet(low / "table.parquet") if (low / "table.parquet").exists()
+             else None)
+        if t is not None:
+            lines += _lammps_lines(t, low, p)
         if (low / "shift.parquet").exists():
-            seeds = (_seeds(pl.read_parquet(low / "table.parquet"))
-                     if (low / "table.parquet").exists() else "1 2 3")
             lines += _shift_lines(pl.read_parquet(low / "shift.parquet"), low, p, lmp.parent,
-                                  seeds)
+                                  _seeds(t) if t is not None else "1 2 3")
     if eq.exists():
         e = pl.read_parquet(eq)
         lines += _agreement(
@@ -221,8 +223,8 @@ def protocol_checks(out: Path) -> list[str]:
             "same seeds, 12,000 t_c each (`python benchmarks/rate_cell.py equivalence`); the SE "
             "of a difference carries the stress point's SE of I through the local slope.", e,
             e.select("mu_s", "tau_ratio", pl.col("I_stress").alias("I"), "quantity",
-                     _pm_column("stress", "stress_se", "stress-controlled"),
-                     _pm_column("rate", "rate_se", "rate-controlled"), "z", "verdict"),
+                     pm_column("stress", "stress_se", "stress-controlled"),
+                     pm_column("rate", "rate_se", "rate-controlled"), "z", "verdict"),
             {"mu_s": "g", "tau_ratio": "g", "I": ".3f", "z": "+.2f"})
     where = ("p_ext = 1e-4; the stress/rate check was run there only"
              if any(low.exists() for low, _ in lows)

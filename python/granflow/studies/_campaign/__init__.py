@@ -22,8 +22,16 @@ from .engine import (
     run_points,
     write_rows,
 )
-from .report import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
+from .report import (
+    cost,
+    dask_recipe,
+    md_table,
+    paper_scale_estimate,
+    plot_campaign_se,
+    pm,
+    pm_column,
+)
 
 __all__ = ["Study", "cli", "cost", "dask_recipe", "done_keys", "error_state", "fmt",
-           "md_table", "paper_scale_estimate", "plot_campaign_se", "pm", "point_of",
+           "md_table", "paper_scale_estimate", "plot_campaign_se", "pm", "pm_column", "point_of",
            "reanalyse", "run_point", "run_points", "write_rows"]

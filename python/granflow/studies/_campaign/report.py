@@ -39,6 +39,12 @@ def pm(v: float, e: float, digits: int = 3) -> str:
     return f"{v:.{digits}f} ± {e:.{digits}f}" if math.isfinite(e) else f"{v:.{digits}f}"
 
 
+def pm_column(value: str, se: str, name: str, digits: int = 4) -> pl.Expr:
+    """The column ``name``: ``value ± se`` as text (:func:`pm`, ``digits`` decimals)."""
+    return pl.struct(value, se).map_elements(lambda r: pm(r[value], r[se], digits),
+                                             return_dtype=pl.String).alias(name)
+
+
 def dask_recipe(module: str, out: str, walltime: str, mode: str = "paper") -> list[str]:
     """A report's lines on running a campaign (``--mode``, the paper-scale one by default)
     with Dask (markdown)."""
