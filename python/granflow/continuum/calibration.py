@@ -1,5 +1,5 @@
-"""The calibration of a local rheology from stress-controlled cell runs (rows of the cell
-campaign with the gradient-frame columns, rheology.GRADIENT_COLUMNS): mu_g(I_g) in Jop et al.'s
+"""The calibration of a local rheology from cell runs, stress- or rate-controlled (rows of the
+cell campaign with the gradient-frame columns, rheology.GRADIENT_COLUMNS): mu_g(I_g) in Jop et al.'s
 form and phi(I_g), per cell pressure, with their covariances, as a
 :class:`granflow.continuum.LocalLaw` (granflow.studies.cross_scene runs it)."""
 
@@ -44,7 +44,8 @@ class Calibration:
 
 
 #: a calibration point: runs with these fields equal and different seeds are its replicas
-POINT = ("p_ext", "N", "tau_ratio")
+#: (stress-controlled at tau_ratio, or rate-controlled at inertial_number)
+POINT = ("p_ext", "N", "tau_ratio", "inertial_number")
 #: the quantities a calibration point keeps
 POINT_OBSERVABLES = ("I_g", "mu_g", "phi", "sigma_g_p")
 
@@ -62,6 +63,8 @@ def pooled_points(points: pl.DataFrame) -> pl.DataFrame:
     (analysis.replicas.replica_mean)."""
     from granflow.analysis.replicas import replica_mean
 
+    if "inertial_number" not in points.columns:  # (a dataset from before rate points)
+        points = points.with_columns(inertial_number=pl.lit(0.0))
     return replica_mean(steady_points(points), POINT, POINT_OBSERVABLES)
 
 

@@ -1,6 +1,7 @@
 """Predict the channel of 000 from the cell of 002: a local mu(I), phi(I) law and the nonlocal
-granular fluidity model (Henann & Kamrin 2013), calibrated in the stress-controlled cell with
-the channel's material, laid over the channel's DEM profiles at several widths.
+granular fluidity model (Henann & Kamrin 2013), calibrated in the cell with the channel's
+material (stress-controlled, and rate-controlled below its arrest), laid over the channel's
+DEM profiles at several widths.
 
     python -m granflow.studies.cross_scene --quick [--out DIR] [--report FILE]
     python -m granflow.studies.cross_scene --full [--out DIR] [--report FILE] [--workers N]
@@ -44,6 +45,11 @@ NEAR_YIELD_LARGE = (0.40, 0.41, 0.42)
 #: below 0.40 at N = 10,000 (N = 2000 arrests at 0.38 and, for some seeds, at 0.40): does a
 #: larger cell hold a slower steady flow? (run last)
 BELOW_YIELD_LARGE = (0.39, 0.395, 0.385, 0.38)
+#: the rate-controlled cell's I (002's, RateCell's parameter), fastest first: from inside
+#: the stress-controlled range (0.02: the two drives overlap) down to the channel's slowest
+#: dense flows (1e-4), where the stress-controlled cell arrests. Its times grow as 1/I below
+#: Plan.rate_I_ref (the same strain): at 5e-4 one run at 1e-4 is ~2e7 steps, ~45 min
+RATE_I = (0.02, 0.01, 3e-3, 1e-3, 3e-4, 1e-4)
 
 
 #: observables kept per calibration point
@@ -67,19 +73,23 @@ SEEDS = (1, 2, 3)
 
 
 def full_plan() -> Plan:
-    """N = 2000 over RATIOS at p a/kn = 2e-4 and 5e-4, then near yield NEAR_YIELD and
-    NEAR_YIELD_LARGE at N = 10,000 (p = 2e-4), then NEAR_YIELD at 5e-4, then
+    """N = 2000 over RATIOS at p a/kn = 2e-4 and 5e-4, then near yield NEAR_YIELD at 2e-4,
+    then the rate-controlled cell over RATE_I at 5e-4 (the wider channels' stress) and at
+    2e-4, then NEAR_YIELD_LARGE at N = 10,000 (p = 2e-4), NEAR_YIELD at 5e-4 and
     BELOW_YIELD_LARGE at N = 10,000: every point with the seeds SEEDS, seed by seed within each
     stage. A resumed campaign skips the runs its dataset holds (the committed one: seeds 1-2
     over RATIOS, 1-3 near yield at N = 2000, seed 1 at N = 10,000)."""
     pts = [Point(MU_CHANNEL, r, s, p_ext=p) for s in SEEDS for p in (P_LOW, P_HIGH)
            for r in RATIOS]
     pts += [Point(MU_CHANNEL, r, s, p_ext=P_LOW) for s in SEEDS for r in NEAR_YIELD]
+    pts += [Point(MU_CHANNEL, 0.0, s, p_ext=p, inertial_number=i) for p in (P_HIGH, P_LOW)
+            for s in SEEDS for i in RATE_I]
     pts += [Point(MU_CHANNEL, r, s, N=10_000, p_ext=P_LOW) for s in SEEDS
             for r in NEAR_YIELD_LARGE]
     pts += [Point(MU_CHANNEL, r, s, p_ext=P_HIGH) for s in SEEDS for r in NEAR_YIELD]
     pts += [Point(MU_CHANNEL, r, s, N=10_000, p_ext=P_LOW) for s in SEEDS
             for r in BELOW_YIELD_LARGE]
+    # (a rate point's stint, budget and floor grow as Plan.rate_I_ref / I below it)
     return _plan("full", pts, stint_steps=20_000,
                  max_shear_steps={2000: 1_000_000, 10_000: 400_000})
 

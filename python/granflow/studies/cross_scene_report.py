@@ -6,6 +6,7 @@ the DEM's bins against the cell's law, and the time it took."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,8 @@ from granflow.continuum.verdict import (
 )
 
 from ._campaign import md_table, pm_column
-from ._campaign.cell import channel_material
+from ._campaign.cell import Point, channel_material
+from ._campaign.engine import with_defaults
 
 MODELS = ("local", "nonlocal")
 COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}
@@ -351,7 +353,9 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     """Calibrate from ``out/points.parquet``, predict the runs of ``channel``, write the
     tables beside the points (fits, cases, compare, model_profiles, residuals) and the
     markdown report to ``path`` (figures in ``<path stem>_figures/``)."""
-    points = pl.read_parquet(out / "points.parquet")
+    raw = pl.read_parquet(out / "points.parquet")
+    points = with_defaults(raw, Point)
+    rate = points.filter(pl.col("inertial_number") > 0)
     nb = n_band if n_band is not None else (8 if plan.name == "quick" else 24)
     pred = predict(points, channel, n_band=nb)
     fits = fits_table(pred.cal)
@@ -376,7 +380,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
             drawn.add(case.W)
             figs.append(plot_width(pred, case.W, case.phi_bar, case.profile,
                                    figdir / f"W{case.W:g}_phi{case.phi_bar:g}.png", case.seed))
-    se = (pl.read_parquet(out / "se_vs_time.parquet")
+    se = (with_defaults(pl.read_parquet(out / "se_vs_time.parquet"), Point)
           if (out / "se_vs_time.parquet").exists() else pl.DataFrame())
     wall = float(points["wall_seconds"].sum())
     mat = channel_material()
@@ -408,7 +412,12 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         f"({wall / 3600:.2f} core-hours; one thread a run);",
         f"* fits, continuum solutions, bands and amplitude fits: {pred.seconds:.0f} s.", "",
         "## 1. Calibration in the cell, with the channel's material", "",
-        "granflow.scenes.cell.ShearCell (stress-controlled, compacted start) with the channel's "
+        "granflow.scenes.cell.ShearCell (stress-controlled, compacted start)"
+        + (f" and, below its arrest, granflow.scenes.RateCell (the rate imposed as I = "
+           f"{', '.join(f'{i:g}' for i in sorted(set(rate['inertial_number'].to_list())))}, "
+           "sigma_yy held at p_ext, the same compacted start; its stints, floor and budget "
+           "are the same strain at every I)" if rate.height else "")
+        + " with the channel's "
         f"particles and law, read from the Channel scene's defaults: sizes {mix} "
         f"(number fractions), kt/kn = {law.kt / law.kn:.4f}, e_n = {law.e_n:g}, mu = 0.5, "
         f"tangential damping 1/2 of the normal, dt = {dt_frac:.4f} t_c (the channel's "
@@ -432,7 +441,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "the larger of the within-run SE (the runs' blocking SEs, combined) and the "
         "between-replica SE (their spread over sqrt(replicas), times the Student factor "
         "for few replicas; none for one replica), both shown as (within / between):", "",
-        md_table(_points_table(pooled), {"p_ext": ".0e", "tau_ratio": ".3f"}), "",
+        md_table(_points_table(pooled), {"p_ext": ".0e"}), "",
         "Fits: mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) (Jop, Forterre & Pouliquen 2006; "
         "row 'mu', the law the models use: c0 = mu_s, c1 = mu_2, c2 = I_0) and phi = phi_0 - "
         "A4 I^a4 (002 (4.7); row 'phi', c0-c2 = phi_0, A4, a4); 002's mu1 = mu1_0 + A1 "
@@ -442,10 +451,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "is propagated; errors scaled by sqrt(chi2/dof) where that exceeds 1 "
         "(`fits.parquet` keeps the covariance):", "",
         md_table(fits.drop("cov", "equation"), {"p_ext": ".0e"}), "",
-        f"**The calibrated range is I = {lo.I_min:.3g} to {lo.I_max:.3g}.** "
-        + _near_yield(points, lo) + " The channel's dense zone shears at I = 1e-4 to 0.04, "
-        "mostly below that range: there both models use the fitted law's continuation to its "
-        "yield ratio mu_s, which is a fit parameter, not a measurement.", "",
+        range_sentence(pred.cal) + " " + _near_yield(points, lo), "",
         "## 2. The models (granflow.continuum)", "",
         "Fully developed flow: sigma_xx uniform (the DEM run's mean), d sigma_xy/dx = "
         "-rho_p phi g from the centre (000 B1-B2), phi = phi(I) in both models. Boundary data "
@@ -486,7 +492,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "",
         md_table(_residual_table(pred.residuals)), "",
         "## Figures", "", *[f"![{p.stem}]({p.relative_to(rel)})" for p in figs], ""]
-    lines += coverage_lines(points, out)
+    lines += coverage_lines(raw, out)  # (its command reads the file's own columns)
     if se.height:
         lines += ["## Error against run time (calibration)", "",
                   "Median over the steady calibration runs of the SE over the first quarter "
@@ -497,8 +503,9 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
               "* sigma_xx and the slip predicted instead of taken from the DEM (the issue's "
               "stretch): sigma_xx from the mass with a measured plug density, slip from a wall "
               "law measured separately;",
-              "* calibration below I = " f"{lo.I_min:.2g}: a rate-controlled cell would reach "
-              "it (the kernel's cell is stress-controlled only).", ""]
+              *(f"* calibration below I = {c.law.I_min:.2g} at p d/kn = {p:g}: the full "
+                "plan's rate-controlled points (cross_scene.RATE_I) reach it, not run yet;"
+                for p, c in pred.cal.items() if c.law.I_min > CHANNEL_I_MIN * 1.5), ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
@@ -527,18 +534,39 @@ def verdict_lines(table: pl.DataFrame) -> list[str]:
             md_table(shown, {"W": "g"}), ""]
 
 
+#: the slowest shear in the channel's dense zone (I = 1e-4 to 0.04, docs/cross_scene.md)
+CHANNEL_I_MIN = 1e-4
+
+
+def range_sentence(cal: Mapping[float, Any]) -> str:
+    """The calibrated I range at each pressure against the channel's dense zone, in words."""
+    ranges = "; ".join(f"I = {c.law.I_min:.3g} to {c.law.I_max:.3g} at p d/kn = {p:g}"
+                       for p, c in sorted(cal.items()))
+    short = [p for p, c in sorted(cal.items()) if c.law.I_min > CHANNEL_I_MIN * 1.5]
+    tail = (" The channel's dense zone shears at I = 1e-4 to 0.04: at p d/kn = "
+            + ", ".join(f"{p:g}" for p in short) + " mostly below the calibrated range, "
+            "where both models use the fitted law's continuation to its yield ratio mu_s, a "
+            "fit parameter, not a measurement." if short else
+            " That covers the channel's dense zone, I = 1e-4 to 0.04: the models' mu(I) "
+            "there is measured, not a continuation.")
+    return f"**The calibrated range is {ranges}.**" + tail
+
+
 def _points_table(pooled: pl.DataFrame) -> pl.DataFrame:
     """The calibration points (calibration.pooled_points): each quantity's mean and its SE
-    with the within-run and between-replica SEs beside it."""
-    cols: list[pl.Expr] = [pl.col("p_ext"), pl.col("N"), pl.col("tau_ratio"),
+    with the within-run and between-replica SEs beside it; ``drive``: the imposed tau/p or
+    (rate-controlled) I."""
+    drive = (pl.when(pl.col("inertial_number") > 0)
+             .then(pl.format("I = {}", pl.col("inertial_number").round_sig_figs(3)))
+             .otherwise(pl.format("tau/p = {}", pl.col("tau_ratio").round(3))))
+    cols: list[pl.Expr] = [pl.col("p_ext"), pl.col("N"), drive.alias("drive"),
                            pl.col("replicas")]
     for x in ("I_g", "mu_g", "phi"):
         cols += [pl.col(x).round_sig_figs(4),
                  pl.format("{} ({} / {})", *(pl.col(f"{x}_se{t}").round_sig_figs(2)
                                               for t in ("", "_within", "_between")))
                  .alias(f"{x} SE (within / between)")]
-    return pooled.sort("p_ext", "N", "tau_ratio").select(
-        *cols, pl.col("sigma_g_p").round_sig_figs(4))
+    return pooled.sort("p_ext", "N", "I_g").select(*cols, pl.col("sigma_g_p").round_sig_figs(4))
 
 
 #: the quantities of the calibration's coverage audit (those the fits use)
@@ -550,7 +578,7 @@ def coverage_lines(points: pl.DataFrame, out: Path) -> list[str]:
     runs that count, calibration.steady_points), in words computed from the data, with the
     command that reads the dataset."""
     steady = steady_points(points)
-    by = list(POINT)
+    by = [c for c in POINT if c in points.columns]  # (a dataset from before rate points)
     reps = steady.group_by(by).len()
     counts = ", ".join(f"{v} with {k} replica{'s' if k > 1 else ''}" for k, v in sorted(
         reps.group_by("len").agg(pl.len().alias("n")).select("len", "n").iter_rows()))
@@ -597,7 +625,7 @@ def coverage_lines(points: pl.DataFrame, out: Path) -> list[str]:
 
 def _near_yield(points: pl.DataFrame, law: Any) -> str:
     """What the cell did near yield, per cell size, in words, from the runs."""
-    d = points.filter(pl.col("tau_ratio") < 0.42)
+    d = points.filter((pl.col("tau_ratio") > 0) & (pl.col("tau_ratio") < 0.42))
     steady = (pl.col("state") == "flowing") & pl.col("converged")
     by = d.group_by("N", "tau_ratio").agg(
         pl.len().alias("runs"), (pl.col("state") == "arrested").sum().alias("arrested"),
@@ -631,7 +659,8 @@ def _se_ratios(se: pl.DataFrame) -> pl.DataFrame:
         if f == 1.0:
             continue
         part = se.filter(pl.col("fraction") == f).join(
-            full, on=["mu_s", "tau_ratio", "seed", "N", "p_ext"], suffix="_all")
+            full, on=["mu_s", "tau_ratio", "inertial_number", "seed", "N", "p_ext"],
+            suffix="_all")
         row: dict[str, Any] = {"fraction of the steady part": f, "runs": part.height}
         for c in ("I", "phi", "mu1"):
             row[f"SE({c}) / SE_all"] = _float((part[f"{c}_se"] / part[f"{c}_se_all"]).median())

@@ -1,7 +1,12 @@
 """The cell campaign (reproduce_002, cross_scene, seed_coverage run it): a *point* is one
 cell run, (mu_s, N, p_ext, tau/p, seed), from the compacted start
 (:class:`granflow.scenes.cell.ShearCell`), run in stints until it is done or its budget of
-shear (``max_shear``) is spent, or it arrested over ARREST_STINTS stints, or it ran away.
+shear (``max_shear``) is spent, or it arrested over ARREST_STINTS stints, or it ran away. A
+point with ``inertial_number`` I > 0 (and tau/p = 0) is the rate-controlled cell
+(:class:`granflow.scenes.RateCell`, the plan's ``rate_normal`` held at p_ext), which reaches
+the slow flows where the stress-controlled cell arrests; below the plan's ``rate_I_ref`` its
+times are those of the plan times rate_I_ref / I (:meth:`Plan.scale`), so that its floor and
+budget stay the same in strain.
 
 The stop rule (:func:`converged`), in this order: the run is flowing and stationary (the
 thirds test of :func:`granflow.analysis.rheology.classify_run`: a drifting run goes on); its
@@ -49,18 +54,31 @@ SE_COLUMNS = ("I", "phi", "mu1")
 
 @dataclass(frozen=True)
 class Point:
-    """One cell run of the campaign."""
+    """One cell run of the campaign: stress-controlled at ``tau_ratio`` = tau/p, or (tau_ratio
+    0) rate-controlled at ``inertial_number`` (module docstring)."""
 
     mu_s: float
     tau_ratio: float
     seed: int
     N: int = 2000
     p_ext: float = 1e-4
+    #: the imposed rate as 002's I (RateCell's parameter); 0: stress-controlled (every point
+    #: before the field existed, which is what its default must say)
+    inertial_number: float = 0.0
+
+    def __post_init__(self) -> None:
+        if (self.tau_ratio > 0) == (self.inertial_number > 0) or min(
+                self.tau_ratio, self.inertial_number) < 0:
+            raise ParameterError(
+                f"invalid point tau_ratio = {self.tau_ratio}, inertial_number = "
+                f"{self.inertial_number}: allowed exactly one of them > 0 (a stress- or a "
+                "rate-controlled cell), the other 0")
 
     @property
     def key(self) -> str:
-        return (f"mu{self.mu_s:g}_N{self.N}_p{self.p_ext:g}_tau{self.tau_ratio:g}"
-                f"_s{self.seed}")
+        drive = (f"tau{self.tau_ratio:g}" if self.inertial_number == 0
+                 else f"I{self.inertial_number:g}")
+        return f"mu{self.mu_s:g}_N{self.N}_p{self.p_ext:g}_{drive}_s{self.seed}"
 
 
 #: relative SE targets, as multiples of the plan's ``se_target``: mu1 and phi (the issue's
@@ -106,10 +124,22 @@ class Plan:
     #: that its floor and budget in strain and correlation times stay those of p_ref. None:
     #: the same t_c at every pressure.
     p_ref: float | None = None
+    #: the inertial number below which a rate-controlled point's times (stint, budget, floor,
+    #: sampling interval) grow as 1/I: its strain per t_c is proportional to I, and its
+    #: correlation times are a fixed strain (phi's ~0.3 at every I, docs/cell.md)
+    rate_I_ref: float = 0.01
+    #: the normal stress a rate-controlled point holds at p_ext (RateCell's ``normal``)
+    rate_normal: str = "yy"
 
-    def scale(self, p_ext: float) -> float:
-        """The factor on the plan's times at pressure ``p_ext`` (``p_ref``)."""
-        return 1.0 if self.p_ref is None else math.sqrt(self.p_ref / p_ext)
+    def scale(self, p_ext: float, inertial_number: float = 0.0) -> float:
+        """The factor on the plan's times at pressure ``p_ext`` (``p_ref``) and, for a
+        rate-controlled point, at ``inertial_number`` (``rate_I_ref``)."""
+        f = 1.0 if self.p_ref is None else math.sqrt(self.p_ref / p_ext)
+        return f * self.rate_factor(inertial_number)
+
+    def rate_factor(self, inertial_number: float) -> float:
+        """rate_I_ref / I for a rate-controlled point slower than ``rate_I_ref``, else 1."""
+        return max(1.0, self.rate_I_ref / inertial_number) if inertial_number > 0 else 1.0
 
     @property
     def dt(self) -> float:
@@ -124,19 +154,26 @@ class Plan:
         """Steps in ``t`` contact times (at least one)."""
         return max(1, round(t / self.dt))
 
-    def max_steps(self, n: int, p_ext: float) -> int:
-        """Steps of shear after which a point of ``n`` particles at ``p_ext`` stops
-        unconverged."""
+    def max_steps(self, n: int, p_ext: float, inertial_number: float = 0.0) -> int:
+        """Steps of shear after which a point of ``n`` particles at ``p_ext`` (and the rate
+        ``inertial_number``) stops unconverged."""
         return self.steps(self.max_shear.get(n, max(self.max_shear.values()))
-                          * self.scale(p_ext))
+                          * self.scale(p_ext, inertial_number))
 
-    def stint_steps(self, p_ext: float) -> int:
-        """Steps of a stint at ``p_ext``."""
-        return self.steps(self.stint * self.scale(p_ext))
+    def stint_steps(self, p_ext: float, inertial_number: float = 0.0) -> int:
+        """Steps of a stint at ``p_ext`` (and the rate ``inertial_number``)."""
+        return self.steps(self.stint * self.scale(p_ext, inertial_number))
 
-    def min_length_at(self, p_ext: float) -> float:
-        """The floor on a steady part at ``p_ext`` in t_c."""
-        return self.min_length * self.scale(p_ext)
+    def min_length_at(self, p_ext: float, inertial_number: float = 0.0) -> float:
+        """The floor on a steady part at ``p_ext`` (and the rate ``inertial_number``) in
+        t_c."""
+        return self.min_length * self.scale(p_ext, inertial_number)
+
+    def sample_every_at(self, inertial_number: float = 0.0) -> int:
+        """Steps between samples: ``sample_every``, times rate_I_ref / I for a slow
+        rate-controlled point (the same samples per strain; a stress-controlled point's
+        is the plan's at every pressure, as the campaigns have run it)."""
+        return max(1, round(self.sample_every * self.rate_factor(inertial_number)))
 
     def targets(self) -> dict[str, float]:
         """Relative SE each observable must reach (SE_TARGETS x ``se_target``)."""
@@ -205,7 +242,8 @@ def long_enough(row: Mapping[str, Any], plan: Plan) -> bool:
     t_avg = row.get("T_avg", 0.0)  # (kernel time, as tau_max; T_avg_tc in t_c)
     tau = row.get("tau_max", math.nan)
     return bool(row["state"] == "flowing" and math.isfinite(tau)
-                and row.get("T_avg_tc", 0.0) >= plan.min_length_at(row["p_ext"])
+                and row.get("T_avg_tc", 0.0) >= plan.min_length_at(
+                    row["p_ext"], row.get("inertial_number") or 0.0)
                 and t_avg >= plan.min_taus * tau
                 and 2.0 * row.get("shear_rate", 0.0) * t_avg >= plan.min_strain)
 
@@ -267,14 +305,22 @@ class CellStudy(Study):
 
     def scene(self, point: Point, plan: Plan, threads: int) -> Any:
         from granflow.scenes.cell import ShearCell
+        from granflow.scenes.rate_cell import RateCell
 
+        every = plan.sample_every_at(point.inertial_number)
+        if point.inertial_number > 0:
+            return RateCell(N=point.N, mu=point.mu_s, p_ext=point.p_ext,
+                            inertial_number=point.inertial_number, normal=plan.rate_normal,
+                            seed=point.seed, material=plan.material, sample_every=every,
+                            threads=threads)
         return ShearCell(N=point.N, mu=point.mu_s, p_ext=point.p_ext,
                          tau_ratio=point.tau_ratio, seed=point.seed, material=plan.material,
-                         sample_every=plan.sample_every, threads=threads)
+                         sample_every=every, threads=threads)
 
     def next_steps(self, scene: Any, point: Point, plan: Plan) -> int:
-        left = plan.max_steps(point.N, point.p_ext) - _shear_steps(scene)
-        return min(plan.stint_steps(point.p_ext), left) if left > 0 else 0
+        left = plan.max_steps(point.N, point.p_ext, point.inertial_number) - _shear_steps(scene)
+        return (min(plan.stint_steps(point.p_ext, point.inertial_number), left) if left > 0
+                else 0)
 
     def context(self, scene: Any) -> dict[str, Any]:
         return {"shear_start_time": float(scene.shear_start_time or 0.0)}
@@ -305,9 +351,10 @@ class CellStudy(Study):
         if row["converged"]:
             return "converged"
         if (row["state"] == "arrested"
-                and row["shear_steps"] >= ARREST_STINTS * plan.stint_steps(point.p_ext)):
+                and row["shear_steps"] >= ARREST_STINTS * plan.stint_steps(
+                    point.p_ext, point.inertial_number)):
             return "arrested"
-        if row["shear_steps"] >= plan.max_steps(point.N, point.p_ext):
+        if row["shear_steps"] >= plan.max_steps(point.N, point.p_ext, point.inertial_number):
             return "budget"
         return None
 

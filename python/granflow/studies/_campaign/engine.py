@@ -42,12 +42,27 @@ def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False,
     new = pl.from_dicts(list(rows), infer_schema_length=None)
     if append and f.exists():
         new = pl.concat([pl.read_parquet(f), new], how="diagonal_relaxed")
+    new = with_defaults(new, point)
     tab = new.to_arrow()
     if point is not None and dataclasses.is_dataclass(point):
         names = json.dumps([x.name for x in dataclasses.fields(point)]).encode()
         tab = tab.replace_schema_metadata({**(tab.schema.metadata or {}),
                                            POINT_FIELDS_KEY: names})
     io.write_parquet(tab, f)
+
+
+def with_defaults(table: pl.DataFrame, point: type | None) -> pl.DataFrame:
+    """``table`` with the fields of the dataclass ``point`` that it lacks, or that some of its
+    rows lack (rows written before the field was added), set to the field's default, the
+    value :func:`point_of` gives them: the replicas of a point then group the same in old
+    rows and new."""
+    if point is None or not dataclasses.is_dataclass(point):
+        return table
+    fill = [x for x in dataclasses.fields(point) if x.default is not dataclasses.MISSING
+            and (x.name not in table.columns or table[x.name].null_count())]
+    return table.with_columns(
+        (pl.col(x.name).fill_null(x.default) if x.name in table.columns
+         else pl.lit(x.default)).alias(x.name) for x in fill)
 
 
 def point_of(cls: type, row: Mapping[str, Any]) -> Any:
@@ -221,7 +236,7 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
         keep.append(row)
     write_rows(outp / "points.parquet", keep, point=cls)
     for k, stem in study.tables.items():
-        write_rows(outp / f"{stem}.parquet", extra[k])
+        write_rows(outp / f"{stem}.parquet", extra[k], point=cls)
     return dropped
 
 
@@ -262,7 +277,7 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
         extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
         write_rows(outp / "points.parquet", [row], append=True, point=cls)
         for stem, rows in extras.items():
-            write_rows(outp / f"{stem}.parquet", rows, append=True)
+            write_rows(outp / f"{stem}.parquet", rows, append=True, point=cls)
         log(f"  {point_of(cls, row).key}: {describe(row)}")
     f = outp / "points.parquet"
     return pl.read_parquet(f) if f.exists() else pl.DataFrame()
