@@ -266,10 +266,15 @@ def lammps_input(ho: dict[str, Any], steps: int, every: int, gain: float) -> str
         "variable ly equal ly",
         "variable lz equal lz",
         "variable xy equal xy",
+        # the material's mass-weighted mean x velocity against the stream temp/deform subtracts
+        # (RATE (y - ylo): the tilt rate is RATE l_y): the box slip that without_slip removes
+        f"variable mslip atom mass*(vx-{f(ho['rate'])}*(y-ylo))",
+        "compute mslip all reduce sum v_mslip",
+        "variable slip equal c_mslip/mass(all)",
         # defined before the deformation so that the stress and the box are sampled at the same
         # configuration (the deform fix changes the box at the end of the step, after this)
         f"fix series all ave/time {int(every)} 1 {int(every)} c_pdef[1] c_pdef[2] c_pdef[3] "
-        "c_pdef[4] c_pdef[5] c_pdef[6] v_vol v_lx v_ly v_lz v_xy file series.txt "
+        "c_pdef[4] c_pdef[5] c_pdef[6] v_vol v_lx v_ly v_lz v_xy v_slip file series.txt "
         "format \" %.17g\"",
         f"fix shear all deform/pressure 1 y pressure {f(ho['p_ext'])} {f(gain)} "
         f"xy erate/rescale {f(ho['rate'])} remap v flip yes",
@@ -304,13 +309,13 @@ def run_lammps(ho: dict[str, Any], steps: int, every: int, gain: float,
                            + ("; ".join(err) or proc.stderr[-2000:] or proc.stdout[-2000:]))
     lg = lp.parse_log(log)
     a = np.loadtxt(workdir / "series.txt", comments="#", ndmin=2)
-    # columns: step, Pxx Pyy Pzz Pxy Pxz Pyz, vol, lx, ly, lz, xy
+    # columns: step, Pxx Pyy Pzz Pxy Pxz Pyz, vol, lx, ly, lz, xy, slip
     a = a[a[:, 0] > 0]
     vol = a[:, 7]
     df = pl.DataFrame({
         "t": a[:, 0] * ho["dt"], "phi": ho["solid_volume"] / vol,
         "sigma_xx": a[:, 1], "sigma_yy": a[:, 2], "sigma_zz": a[:, 3], "sigma_xy": a[:, 4],
-        "lx": a[:, 8], "ly": a[:, 9], "lz": a[:, 10], "xy": a[:, 11],
+        "lx": a[:, 8], "ly": a[:, 9], "lz": a[:, 10], "xy": a[:, 11], "slip_vx": a[:, 12],
     })  # fmt: skip
     loop = lg["loops"][-1] if lg["loops"] else None
     facts = {"wall_s": wall, "loop_s": loop["seconds"] if loop else math.nan,
@@ -351,24 +356,36 @@ def derived(df: pl.DataFrame, p_ext: float) -> pl.DataFrame:
 
 def without_slip(df: pl.DataFrame, ho: dict[str, Any]) -> pl.DataFrame:
     """A LAMMPS series with the box slip's kinetic term taken out of sigma_xx (box_slip):
-    rho phi dv^2 with dv = RATE (l_y - l_y0)/2, the lower face's displacement when the box
-    dilates about its centre (measured: the end states' mean slip matches it within 0.002
+    rho phi dv^2, dv the material's mass-weighted mean v_x less the stream, measured at each
+    sample (``slip_vx``) where the series has it, else RATE (l_y - l_y0)/2, the lower face's
+    displacement when the box dilates about its centre (the series committed before
+    ``slip_vx`` was written; measured: the end states' mean slip matches it within 0.002
     RATE l_y, benchmarks/NOTES.md). Without it LAMMPS's N1/p reads the material's uniform
     slide past the box's stream as normal stress (+0.016-0.021 at I = 0.15)."""
-    dv = ho["rate"] * (pl.col("ly") - ho["H"][1][1]) / 2.0
+    dv = (pl.col("slip_vx") if "slip_vx" in df.columns
+          else ho["rate"] * (pl.col("ly") - ho["H"][1][1]) / 2.0)
     return df.with_columns(pl.col("sigma_xx") - ho["density"] * pl.col("phi") * dv**2)
 
 
-def run_stats(df: pl.DataFrame, p_ext: float, drop: float) -> dict[str, Any]:
-    """Steady start (MSER on phi, p, mu; at least ``drop`` of the run) and each quantity's
-    mean and blocking SE over the steady part."""
+def mser_start(df: pl.DataFrame, p_ext: float) -> tuple[float, bool]:
+    """The MSER steady start on phi, p, mu of a series (its time) and whether it settled."""
+    d = derived(df, p_ext)
+    ss = cell_steady_start(d, key_columns=("phi", "p", "mu"))
+    return float(d["t"][int(ss.index)]), bool(ss.settled)
+
+
+def run_stats(df: pl.DataFrame, p_ext: float, drop: float,
+              start_at: tuple[float, bool] | None = None) -> dict[str, Any]:
+    """Steady start (MSER on phi, p, mu, or ``start_at``: the (time, settled) of the MSER
+    start taken on the full series before it was thinned; at least ``drop`` of the run) and
+    each quantity's mean and blocking SE over the steady part."""
     d = derived(df, p_ext)
     t = d["t"].to_numpy()
-    ss = cell_steady_start(d, key_columns=("phi", "p", "mu"))
-    start = max(int(ss.index), int(math.ceil(drop * len(t))))
+    t0, settled = start_at if start_at is not None else mser_start(df, p_ext)
+    start = max(int(np.searchsorted(t, t0)), int(math.ceil(drop * len(t))))
     dts = float(t[1] - t[0]) if len(t) > 1 else 1.0
     row: dict[str, Any] = {"samples": len(t), "steady_start": start, "t_steady": float(t[start]),
-                           "settled": bool(ss.settled), "t_end": float(t[-1])}
+                           "settled": settled, "t_end": float(t[-1])}
     for q in QUANTITIES:
         b = blocking(d[q].to_numpy()[start:], dts)
         row[q], row[f"{q}_se"], row[f"{q}_tau"] = b.mean, b.se, b.tau
@@ -381,6 +398,14 @@ def _both_codes(g: pl.DataFrame) -> tuple[dict[str, Any], dict[str, Any]] | None
     unless both codes are there."""
     by = {r["code"]: r for r in g.iter_rows(named=True)}
     return (by["granflow"], by["lammps"]) if all(c in by for c in CODES) else None
+
+
+def read_series(out: Path, f: Path) -> pl.DataFrame:
+    """The series ``f`` (OUT/series/<code>_<run>.parquet), LAMMPS's without its box slip's
+    kinetic term (without_slip)."""
+    df = pl.read_parquet(f)
+    code, name = f.stem.split("_", 1)
+    return without_slip(df, granflow_handoff(out, name)) if code == "lammps" else df
 
 
 def granflow_handoff(out: Path, name: str) -> dict[str, Any]:
@@ -402,11 +427,11 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
                     if not f.exists():
                         continue
                     row = {"code": code, "mu_s": mu_s, "I": inertial, "seed": seed}
-                    df = pl.read_parquet(f)
-                    if code == "lammps":
-                        df = without_slip(df, granflow_handoff(
-                            out, point_name(mu_s, inertial, seed)))
-                    row.update(run_stats(df, P_EXT, drop))
+                    meta = json.loads(f.with_suffix(".json").read_text()) if f.with_suffix(
+                        ".json").exists() else {}
+                    start = meta.get("mser_start_full")  # (thinned: the full series' start)
+                    row.update(run_stats(read_series(out, f), P_EXT, drop,
+                                         tuple(start) if start else None))
                     runs.append(row)
     if not runs:
         return pl.DataFrame(), pl.DataFrame()
@@ -530,13 +555,16 @@ def thin_series(out: Path, k: int) -> int:
     sqrt(1e-4/p_ext) times the steps for the same strain, so its series are thinned to the
     p_ext = 1e-4 runs' samples per unit strain before they are committed. The statistics are
     blocking SEs of correlated samples, which thinning below the correlation time leaves
-    alone. Returns the number of series thinned."""
+    alone; the MSER start is not (taken on the thinned series it moved granflow's means at
+    1e-6 by up to 1.7 SE), so the full series' start goes to the .json (``mser_start_full``)
+    and the table keeps it. Returns the number of series thinned."""
     done = 0
     for f in sorted((out / "series").glob("*.parquet")):
         meta_path = f.with_suffix(".json")
         meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
         if "thinned" in meta:
             continue
+        meta["mser_start_full"] = list(mser_start(read_series(out, f), P_EXT))
         pl.read_parquet(f).gather_every(k).write_parquet(f)
         meta["sampled_every"] = meta.get("every")
         meta["every"] = meta["sampled_every"] * k if meta["sampled_every"] else None

@@ -94,3 +94,19 @@ def test_the_calibration_pools_rate_points_apart_from_stress_points():
     # a dataset from before rate points has no such column, and pools as before
     old = runs.filter(pl.col("inertial_number") == 0).drop("inertial_number")
     assert pooled_points(old)["replicas"].to_list() == [2]
+
+
+def test_select_runs_a_piece_of_a_plan_with_its_settings():
+    from granflow.studies import reproduce_000
+    from granflow.studies._campaign.command import select
+
+    plan = full_plan()
+    one = select(plan, r"_I0\.001_s1$")
+    assert [p.key for p in one.points] == ["mu0.5_N2000_p0.0005_I0.001_s1",
+                                           "mu0.5_N2000_p0.0002_I0.001_s1"]
+    assert one.max_shear == plan.max_shear and one.stint == plan.stint
+    wide = select(reproduce_000.widths_plan(), "^W150_")
+    assert wide.points and all(p.W == 150 for p in (*wide.points, *wide.branches, *wide.later))
+    for bad in ("(", "no_such_point"):
+        with pytest.raises(ParameterError, match="select"):
+            select(plan, bad)

@@ -34,6 +34,9 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
                     "shares the cores)")
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
     ap.add_argument("--only-report", action="store_true", help="no runs, the report only")
+    ap.add_argument("--select", default=None, metavar="REGEX",
+                    help="run only the plan's points whose key matches (re.search), e.g. "
+                    "'_I0.001_s1$'; the report still covers the whole dataset")
     ap.add_argument("--reanalyse", action="store_true",
                     help="first recompute the finished points from the data kept in OUT/work")
     for name, (default, text) in (options or {}).items():
@@ -41,6 +44,13 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     a = ap.parse_args(list(argv) if argv is not None else None)
     chosen = next((n for n in plans if getattr(a, n)), "quick")
     plan = plans[chosen][0]()
+    if a.select is not None:
+        from granflow.errors import ParameterError
+
+        try:
+            plan = select(plan, a.select)
+        except ParameterError as e:
+            ap.error(str(e))
     out = Path(a.out or f"results/{stem}_{plan.name}")
     if a.reanalyse:
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
@@ -49,3 +59,29 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     path = write_report(out, Path(a.report) if a.report else out / "report.md", plan,
                         **{k: getattr(a, k) for k in options or {}})
     print(f"report: {path}")
+
+
+def select(plan: Any, pattern: str) -> Any:
+    """``plan`` with only the points whose ``key`` matches ``pattern`` (re.search) in each of
+    its tuples of points (a cell plan's ``points``; reproduce_000's ``points``, ``branches``
+    and ``later``): a piece of a campaign run into the same dataset, with the plan's settings
+    unchanged. Raises ParameterError if the pattern is not a regular expression or matches
+    no point."""
+    import dataclasses
+    import re
+
+    from granflow.errors import ParameterError
+
+    try:
+        rx = re.compile(pattern)
+    except re.error as e:
+        raise ParameterError(f"invalid select = {pattern!r}: allowed a regular expression "
+                             f"({e})") from None
+    kept = {f.name: tuple(p for p in v if rx.search(p.key))
+            for f in dataclasses.fields(plan)
+            if isinstance(v := getattr(plan, f.name), tuple) and v and hasattr(v[0], "key")}
+    if not any(kept.values()):
+        raise ParameterError(f"invalid select = {pattern!r}: allowed a pattern matching at "
+                             f"least one point key of the {plan.name} plan (e.g. "
+                             f"{next(iter(plan.points)).key!r})")
+    return dataclasses.replace(plan, **kept)
