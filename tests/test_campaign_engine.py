@@ -4,6 +4,7 @@ stint loop, its one stop rule (run and reanalyse alike), resuming, and errors by
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -127,6 +128,8 @@ def test_the_loop_stops_by_the_rule_and_classifies_errors_by_type(campaign):
     assert rows["unstable"]["error"].startswith("InstabilityError")
     assert rows["runs_out"]["error"] is None and not any(rows[k]["converged"] for k in rows)
     assert all(r["wall_seconds"] > 0 for r in rows.values())
+    # (CPU time of the point's process, all its threads: polars' pool may add to one thread)
+    assert all(0 < r["cpu_seconds"] < math.inf for r in rows.values())
     # the rows of further tables: none from a point that ended with an error
     s = pl.read_parquet(out / "samples.parquet")
     assert set(s["name"].to_list()) == {"runs_out", "arrests"}
@@ -142,6 +145,15 @@ def test_a_finished_point_is_not_run_again_and_an_unfinished_one_goes_on(campaig
     # a longer budget: the point goes on from its checkpoint (4 more stints)
     row = run_point(Scripted(), POINTS[0], Plan(t_max=14.0), str(out / "work"))
     assert row["t_run"] == 14.0 and row["stints"] == 14 and row["samples"] == 56
+    first = d.filter(pl.col("name") == "runs_out").row(0, named=True)
+    assert row["cpu_seconds"] > first["cpu_seconds"]  # (the resumed part adds to it)
+    # a work directory from before cpu_seconds: unknown, not the resumed part alone
+    meta = out / "work" / POINTS[0].key / "meta.json"
+    kept = json.loads(meta.read_text())
+    del kept["cpu_seconds"]
+    meta.write_text(json.dumps(kept))
+    row = run_point(Scripted(), POINTS[0], Plan(t_max=15.0), str(out / "work"))
+    assert math.isnan(row["cpu_seconds"]) and row["wall_seconds"] > first["wall_seconds"]
 
 
 def test_reanalyse_calls_the_same_stop_rule(campaign):

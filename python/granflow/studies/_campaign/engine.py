@@ -5,7 +5,7 @@ A study implements :class:`Study` (one instance, picklable: the pool sends it to
 workers); the loop (:func:`run_point`) is, for each point in ``OUT/work/<key>/``: restore its
 checkpoint and tables, or build and prepare the scene; then stints of
 :meth:`Study.next_steps` steps, each followed by writing the scene's tables, checkpoint and
-``meta.json`` (wall time, preparation time, the stints' states and the row's context), the
+``meta.json`` (wall and CPU time, preparation time, the stints' states and the row's context), the
 point's row (:meth:`Study.row`) and the one stop rule (:meth:`Study.stop`), which
 :func:`reanalyse` calls too. A :class:`~granflow.errors.GranflowError` ends a point with
 ``state`` "runaway" (a :class:`~granflow.errors.DilationError`) or "failed" and the error.
@@ -159,13 +159,17 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     d.mkdir(parents=True, exist_ok=True)
     ck, meta = d / "checkpoint.gfck", d / "meta.json"
     scene = study.scene(point, plan, threads)
-    info: dict[str, Any] = {"wall_seconds": 0.0, "prep_seconds": math.nan}
+    # (cpu_seconds: the process's CPU time over the point, all its threads: its core-seconds
+    # whatever else shares the cores, where wall_seconds counts the waits as well)
+    info: dict[str, Any] = {"wall_seconds": 0.0, "cpu_seconds": 0.0, "prep_seconds": math.nan}
     restored = ck.exists() and meta.exists()
     if restored:
         scene.restore(ck)
         scene.load_tables(_read_tables(d))
-        info.update(json.loads(meta.read_text()))
-    t0 = time.perf_counter()
+        kept = json.loads(meta.read_text())
+        # (a work directory from before cpu_seconds: its CPU time so far is unknown)
+        info.update({"cpu_seconds": math.nan, **kept})
+    t0, c0 = time.perf_counter(), time.process_time()
     if not restored:
         study.start(scene, point, plan, Path(work))
         info["prep_seconds"] = time.perf_counter() - t0
@@ -175,9 +179,12 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     def wall() -> float:
         return float(info["wall_seconds"]) + time.perf_counter() - t0
 
+    def cpu() -> float:
+        return float(info.get("cpu_seconds", math.nan)) + time.process_time() - c0
+
     def write_meta() -> None:
-        meta.write_text(json.dumps({**info, "wall_seconds": wall(), "history": history,
-                                    "context": context}))
+        meta.write_text(json.dumps({**info, "wall_seconds": wall(), "cpu_seconds": cpu(),
+                                    "history": history, "context": context}))
 
     error: GranflowError | None = None
     row: dict[str, Any] = {}
@@ -203,7 +210,8 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
         row.update(state=error_state(error), error=f"{type(error).__name__}: {error}",
                    converged=False, **study.failure(scene, context),
                    **{k: [] for k in study.tables})
-    row.update(study.progress(scene, info["prep_seconds"]), wall_seconds=wall())
+    row.update(study.progress(scene, info["prep_seconds"]), wall_seconds=wall(),
+               cpu_seconds=cpu())
     return row
 
 
