@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import polars as pl
 import pytest
-from granflow.continuum.calibration import pooled_points
+from granflow.continuum.calibration import continuation_check, pooled_points
 from granflow.errors import ParameterError
 from granflow.scenes import RateCell
 from granflow.scenes.cell import ShearCell
@@ -110,3 +111,36 @@ def test_select_runs_a_piece_of_a_plan_with_its_settings():
     for bad in ("(", "no_such_point"):
         with pytest.raises(ParameterError, match="select"):
             select(plan, bad)
+
+
+def _on_law(tau: float, i: float, seed: int, ig: float, shift: float = 0.0,
+            rng: np.random.Generator | None = None) -> dict[str, float | int | str | bool]:
+    """A steady calibration run on mu = 0.35 + 0.3 I/(I + 0.1), phi = 0.59 - 0.15 I (with
+    noise of its SEs), ``shift`` added to mu."""
+    r = rng or np.random.default_rng(seed)
+    return {"mu_s": 0.5, "tau_ratio": tau, "inertial_number": i, "seed": seed, "N": 2000,
+            "p_ext": 5e-4, "state": "flowing", "converged": True,
+            "I_g": ig, "I_g_se": 0.01 * ig,
+            "mu_g": 0.35 + 0.3 * ig / (ig + 0.1) + shift + r.normal(0, 1e-3), "mu_g_se": 1e-3,
+            "phi": 0.59 - 0.15 * ig + r.normal(0, 3e-4), "phi_se": 3e-4,
+            "sigma_g_p": 1.0, "sigma_g_p_se": 1e-3}
+
+
+def test_rate_points_are_checked_against_the_stress_law_alone():
+    rng = np.random.default_rng(4)
+    stress = [_on_law(0.4 + 0.02 * k, 0.0, s, ig, rng=rng) for k, ig in
+              enumerate((0.02, 0.04, 0.08, 0.15, 0.3, 0.5)) for s in (1, 2)]
+    on = [_on_law(0.0, 1e-3, s, 0.002, rng=rng) for s in (1, 2, 3)]
+    check = continuation_check(pl.DataFrame(stress + on))
+    assert check["quantity"].to_list() == ["mu_g", "phi"]
+    assert check["where"].to_list() == ["continuation"] * 2
+    assert (check["z"].abs() < 3).all() and (check["replicas"] == 3).all()
+    # a rate point 0.02 above the law (20 SEs) is found; one inside the range is "overlap"
+    off = [_on_law(0.0, 1e-3, s, 0.002, shift=0.02, rng=rng) for s in (1, 2, 3)]
+    mid = [_on_law(0.0, 0.02, s, 0.05, rng=rng) for s in (1, 2, 3)]
+    check = continuation_check(pl.DataFrame(stress + off + mid)).filter(
+        pl.col("quantity") == "mu_g").sort("I_g")
+    assert check["z"][0] > 5 and abs(check["z"][1]) < 3
+    assert check["where"].to_list() == ["continuation", "overlap"]
+    # no rate points (or no stress points): nothing to check
+    assert continuation_check(pl.DataFrame(stress)).is_empty()

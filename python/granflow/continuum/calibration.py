@@ -116,3 +116,48 @@ def fits_table(cal: Mapping[float, Calibration]) -> pl.DataFrame:
                          "cov": [float(v) for v in f.cov_scaled.ravel()],
                          "I_min": c.law.I_min, "I_max": c.law.I_max})
     return pl.DataFrame(rows)
+
+
+#: the checked quantities of a rate-controlled point against the stress-controlled law
+CHECKED = (("mu_g", "mu"), ("phi", "phi"))
+
+
+def continuation_check(points: pl.DataFrame, n_draws: int = 400,
+                       seed: int = 0) -> pl.DataFrame:
+    """The rate-controlled calibration points against the law fitted to the stress-controlled
+    points alone, per pressure: one row per rate point and quantity (mu_g, phi) with the
+    point's replica mean and SE, the stress law's value at the point's I_g and its band (the
+    SD over ``n_draws`` laws drawn from the fits' covariance), the difference's z over the
+    combined SE, and whether I_g lies inside the stress points' range ("overlap": the two
+    drives measure the same flow, so they must agree to be pooled) or below it
+    ("continuation": the rate point tests the stress law's continuation, which the models
+    used before there were rate points). Empty where a pressure lacks either drive."""
+    pooled = pooled_points(points)
+    rows = []
+    for p in sorted(set(pooled["p_ext"].to_list())):
+        at = pooled.filter(pl.col("p_ext") == p)
+        rate = at.filter(pl.col("inertial_number") > 0)
+        stress = points.filter((pl.col("p_ext") == p) & (pl.col("tau_ratio") > 0))
+        if rate.is_empty() or stress.is_empty():
+            continue
+        try:
+            cal = calibrate(stress)[float(p)]
+        except ParameterError:
+            continue
+        mu_cov, phi_cov = cal.covariances()
+        draws = cal.law.sample(mu_cov, phi_cov, n_draws, np.random.default_rng(seed))
+        ig = rate["I_g"].to_numpy()
+        for col, fn in CHECKED:
+            law = getattr(cal.law, fn)(ig)
+            band = np.std([getattr(d, fn)(ig) for d in draws], axis=0)
+            for k, r in enumerate(rate.iter_rows(named=True)):
+                se = float(np.hypot(r[f"{col}_se"], band[k]))
+                diff = float(r[col] - law[k])
+                rows.append({
+                    "p_ext": float(p), "inertial_number": r["inertial_number"],
+                    "replicas": r["replicas"], "I_g": r["I_g"], "quantity": col,
+                    "measured": r[col], "measured_se": r[f"{col}_se"],
+                    "stress_law": float(law[k]), "band": float(band[k]), "diff": diff,
+                    "z": diff / se if se > 0 else float("nan"),
+                    "where": ("overlap" if r["I_g"] >= cal.law.I_min else "continuation")})
+    return pl.DataFrame(rows)

@@ -16,7 +16,12 @@ from matplotlib.figure import Figure
 
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import ZONE_COLOURS, save_figure
-from granflow.continuum.calibration import POINT, fits_table, steady_points
+from granflow.continuum.calibration import (
+    POINT,
+    continuation_check,
+    fits_table,
+    steady_points,
+)
 from granflow.continuum.channel_model import (
     A_PHI_BAR,
     A_WIDTH,
@@ -452,6 +457,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "(`fits.parquet` keeps the covariance):", "",
         md_table(fits.drop("cov", "equation"), {"p_ext": ".0e"}), "",
         range_sentence(pred.cal) + " " + _near_yield(points, lo), "",
+        *continuation_lines(continuation_check(points)),
         "## 2. The models (granflow.continuum)", "",
         "Fully developed flow: sigma_xx uniform (the DEM run's mean), d sigma_xy/dx = "
         "-rho_p phi g from the centre (000 B1-B2), phi = phi(I) in both models. Boundary data "
@@ -532,6 +538,34 @@ def verdict_lines(table: pl.DataFrame) -> list[str]:
             "state there).", "",
             f"**Does a cell calibration predict the channel? {answer(table)}**", "",
             md_table(shown, {"W": "g"}), ""]
+
+
+def continuation_lines(check: pl.DataFrame) -> list[str]:
+    """The rate-controlled points against the stress-controlled law
+    (calibration.continuation_check), a table and its verdict in words; none without rate
+    points."""
+    if check.is_empty():
+        return []
+    far = check.filter(pl.col("z").abs() > 2.0)
+    verdict = ("every one within 2 combined SEs" if far.is_empty() else
+               f"{far.height} of {check.height} beyond 2 combined SEs: " + "; ".join(
+                   f"{r['quantity']} at I_g = {r['I_g']:.3g}, p d/kn = {r['p_ext']:g} "
+                   f"(z {r['z']:+.1f}, {r['where']})" for r in far.iter_rows(named=True)))
+    shown = check.select(
+        pl.col("p_ext"), pl.col("inertial_number").alias("I (imposed)"), "replicas",
+        pl.col("I_g").round_sig_figs(3), "quantity",
+        pm_column("measured", "measured_se", "rate-controlled"),
+        pm_column("stress_law", "band", "stress-controlled law (band)"),
+        pl.col("z").round(2), "where")
+    return ["**The rate-controlled points against the stress-controlled law.** Each rate "
+            "point's replica mean against the law fitted to the stress-controlled points "
+            "alone at its pressure (band: the SD over laws drawn from that fit's "
+            "covariance); z over the combined SE. 'overlap': I_g inside the stress points' "
+            "range, where the two drives must agree for the points to be pooled into one "
+            "law; 'continuation': below it, where the models used the stress law's "
+            "continuation before there were rate points "
+            f"(`granflow.continuum.calibration.continuation_check`). {verdict}:", "",
+            md_table(shown, {"p_ext": ".0e", "I (imposed)": ".0e"}), ""]
 
 
 #: the slowest shear in the channel's dense zone (I = 1e-4 to 0.04, docs/cross_scene.md)
