@@ -427,8 +427,8 @@ def build_tables(out: Path, mus: list[float], inertials: list[float], seeds: lis
                     if not f.exists():
                         continue
                     row = {"code": code, "mu_s": mu_s, "I": inertial, "seed": seed}
-                    meta = json.loads(f.with_suffix(".json").read_text()) if f.with_suffix(
-                        ".json").exists() else {}
+                    j = f.with_suffix(".json")
+                    meta = json.loads(j.read_text()) if j.exists() else {}
                     start = meta.get("mser_start_full")  # (thinned: the full series' start)
                     row.update(run_stats(read_series(out, f), P_EXT, drop,
                                          tuple(start) if start else None))

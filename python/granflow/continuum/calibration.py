@@ -144,8 +144,7 @@ def continuation_check(points: pl.DataFrame, n_draws: int = 400,
             cal = calibrate(stress)[float(p)]
         except ParameterError:
             continue
-        mu_cov, phi_cov = cal.covariances()
-        draws = cal.law.sample(mu_cov, phi_cov, n_draws, np.random.default_rng(seed))
+        draws = cal.sample(n_draws, seed)
         ig = rate["I_g"].to_numpy()
         for col, fn in CHECKED:
             law = getattr(cal.law, fn)(ig)

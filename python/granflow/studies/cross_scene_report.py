@@ -509,9 +509,9 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
               "* sigma_xx and the slip predicted instead of taken from the DEM (the issue's "
               "stretch): sigma_xx from the mass with a measured plug density, slip from a wall "
               "law measured separately;",
-              *(f"* calibration below I = {c.law.I_min:.2g} at p d/kn = {p:g}: the full "
-                "plan's rate-controlled points (cross_scene.RATE_I) reach it, not run yet;"
-                for p, c in pred.cal.items() if c.law.I_min > CHANNEL_I_MIN * 1.5), ""]
+              *(f"* calibration below I = {pred.cal[p].law.I_min:.2g} at p d/kn = {p:g}: the "
+                "full plan's rate-controlled points (cross_scene.RATE_I) reach it, not run yet;"
+                for p in short_of_channel(pred.cal)), ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
@@ -572,11 +572,17 @@ def continuation_lines(check: pl.DataFrame) -> list[str]:
 CHANNEL_I_MIN = 1e-4
 
 
+def short_of_channel(cal: Mapping[float, Any]) -> list[float]:
+    """The pressures whose calibration stops short of the channel's slowest dense shear
+    (its lowest I above 1.5 CHANNEL_I_MIN)."""
+    return [p for p, c in sorted(cal.items()) if c.law.I_min > CHANNEL_I_MIN * 1.5]
+
+
 def range_sentence(cal: Mapping[float, Any]) -> str:
     """The calibrated I range at each pressure against the channel's dense zone, in words."""
     ranges = "; ".join(f"I = {c.law.I_min:.3g} to {c.law.I_max:.3g} at p d/kn = {p:g}"
                        for p, c in sorted(cal.items()))
-    short = [p for p, c in sorted(cal.items()) if c.law.I_min > CHANNEL_I_MIN * 1.5]
+    short = short_of_channel(cal)
     tail = (" The channel's dense zone shears at I = 1e-4 to 0.04: at p d/kn = "
             + ", ".join(f"{p:g}" for p in short) + " mostly below the calibrated range, "
             "where both models use the fitted law's continuation to its yield ratio mu_s, a "
