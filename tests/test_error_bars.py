@@ -140,6 +140,17 @@ def test_coverage_counts_only_steady_replicas_and_has_a_command(tmp_path, capsys
     assert tab["pairs"][0] == 10 and "rms_z" in capsys.readouterr().out
 
 
+def test_coverage_names_the_worst_pair_by_the_fields_that_differ():
+    d = _replicas(5, 2, 0.01, 0.01, 5).with_columns(pl.lit(0.0).alias("inertial_number"))
+    d = d.with_columns(pl.when((pl.col("mu_s") > 0.35) & (pl.col("seed") == 2))
+                       .then(pl.col("I") + 1.0).otherwise(pl.col("I")).alias("I"))
+    worst = cov.coverage(d, ["mu_s", "inertial_number"], ["I"])["worst"][0]
+    # a field all points share says nothing; the one that tells them apart names the pair
+    assert worst == "mu_s 0.4 (seeds 1, 2)"
+    one = cov.coverage(d.filter(pl.col("mu_s") > 0.35), ["mu_s", "inertial_number"], ["I"])
+    assert one["worst"][0] == "mu_s 0.4, inertial_number 0 (seeds 1, 2)"
+
+
 # --------------------------------------------------------------------------------------------
 # the stop rule
 # --------------------------------------------------------------------------------------------

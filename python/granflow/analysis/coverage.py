@@ -79,8 +79,12 @@ def coverage(points: TableLike, by: Sequence[str],
     """The audit (module docstring) over the replicas of ``points`` that count (pass only
     those: :func:`steady_rows`). One row per observable: ``points`` (with at least two
     replicas), ``pairs``, ``dof``, ``rms_z``, its ``level`` interval ``rms_z_lo`` /
-    ``rms_z_hi``, and the worst pair (``max_abs_z`` and its point, ``worst``)."""
+    ``rms_z_hi``, and the worst pair (``max_abs_z`` and its point, ``worst``, named by the
+    fields of ``by`` that differ between points)."""
     pz = pair_z(points, by, observables, seed)
+    # the worst pair is named by the fields that tell points apart (a field every point shares,
+    # such as a stress campaign's inertial_number 0, says nothing)
+    named = [k for k in by if pz.height and pz[k].n_unique() > 1] or list(by)
     rows = []
     for o in observables:
         z = pz[f"z_{o}"].to_numpy() if pz.height else np.zeros(0)
@@ -105,7 +109,7 @@ def coverage(points: TableLike, by: Sequence[str],
             r = used.row(j, named=True)
             mx = float(abs(zz[j]))
             worst = ", ".join(f"{k} {r[k]:g}" if isinstance(r[k], float) else f"{k} {r[k]}"
-                              for k in by) + f" (seeds {r['seed_a']}, {r['seed_b']})"
+                              for k in named) + f" (seeds {r['seed_a']}, {r['seed_b']})"
         rows.append({"observable": o, "points": used.select(by).unique().height
                      if used.height else 0, "pairs": int(zz.size), "dof": dof,
                      "rms_z": rms, "rms_z_lo": lo, "rms_z_hi": hi, "max_abs_z": mx,
