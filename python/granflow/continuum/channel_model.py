@@ -246,24 +246,33 @@ def zone_bins(profile: pl.DataFrame) -> dict[str, npt.NDArray[np.int64]]:
     return out
 
 
+def zone_residuals(profile: pl.DataFrame, du: FloatArray, phi: FloatArray
+                   ) -> dict[str, tuple[npt.NDArray[np.int64], FloatArray, FloatArray]]:
+    """Per zone of a DEM half ``profile`` (:func:`zone_bins`): its bins, and a model's
+    residuals there: of u - u_slip relative to the DEM's u_max - u_slip (``du``: the model's
+    u less its wall value, at the profile's bins) and of ``phi``. The one definition of a
+    zone's residuals (:func:`zone_misfits`, :func:`granflow.continuum.verdict.zone_errors`)."""
+    u = profile["u"].to_numpy()
+    r_u = (np.asarray(du, dtype=np.float64) - (u - u[0])) / (u[-1] - u[0])
+    r_phi = np.asarray(phi, dtype=np.float64) - profile["phi"].to_numpy()
+    return {zone: (idx, r_u[idx], r_phi[idx]) for zone, idx in zone_bins(profile).items()}
+
+
 def zone_misfits(case: ChannelCase, prof: Profile, model: str) -> list[dict[str, Any]]:
     """Per zone of the DEM profile: RMS misfit of u - u_slip (relative to u_max - u_slip),
     of log10 |du/dx| (each floored at 1e-6, the local plug's zero) and of phi; the wall
     zone without its first bin (the boundary data)."""
     t = case.profile
-    xi = t["xi"].to_numpy()
-    m = prof.at(xi)
-    u, gd, phi = (t[c].to_numpy() for c in ("u", "gamma_dot", "phi"))
-    span = u[-1] - u[0]
+    m = prof.at(t["xi"].to_numpy())
+    gd = t["gamma_dot"].to_numpy()
     rows = []
-    for zone, idx in zone_bins(t).items():
+    for zone, (idx, r_u, r_phi) in zone_residuals(t, m["u"] - m["u"][0], m["phi"]).items():
         lg = np.log10(np.maximum(m["dudx"][idx], 1e-6)) - np.log10(
             np.maximum(np.abs(gd[idx]), 1e-6))
         rows.append({"W": case.W, "phi_bar": case.phi_bar, "model": model, "zone": zone,
-                     "n_bins": int(idx.size),
-                     "u_rel": float(np.sqrt(np.mean(((m["u"][idx] - u[idx]) / span) ** 2))),
+                     "n_bins": int(idx.size), "u_rel": float(np.sqrt(np.mean(r_u**2))),
                      "log_dudx": float(np.sqrt(np.mean(lg**2))),
-                     "phi": float(np.sqrt(np.mean((m["phi"][idx] - phi[idx]) ** 2)))})
+                     "phi": float(np.sqrt(np.mean(r_phi**2)))})
     return rows
 
 

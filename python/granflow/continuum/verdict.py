@@ -26,7 +26,7 @@ import numpy as np
 import polars as pl
 
 from ._checks import FloatArray, bad
-from .channel_model import zone_bins
+from .channel_model import zone_residuals
 
 #: u - u_slip within this fraction of u_max - u_slip (the cross-scene target)
 U_TARGET = 0.10
@@ -81,14 +81,14 @@ def zone_errors(cases: Sequence[Any], profiles: pl.DataFrame) -> pl.DataFrame:
     (``phi_abs``) with their SEs (module docstring). ``cases``: the runs
     (:class:`granflow.continuum.channel_model.ChannelCase`: the DEM's bins with SEs and
     zones); ``profiles``: the models at those bins with their bands (a ChannelPrediction's
-    ``profiles``). The bins of each zone are :func:`channel_model.zone_bins`'s."""
+    ``profiles``). The residuals of each zone are
+    :func:`channel_model.zone_residuals`'s."""
     rows = []
     for case in cases:
         t = case.profile
-        u, phi = t["u"].to_numpy(), t["phi"].to_numpy()
         u_se = t["u_se"].to_numpy() if "u_se" in t.columns else np.zeros(t.height)
         phi_se = t["phi_se"].to_numpy() if "phi_se" in t.columns else np.zeros(t.height)
-        span = u[-1] - u[0]
+        span = abs(t["u"][-1] - t["u"][0])
         sel = (pl.col("W") == case.W) & (pl.col("phi_bar") == case.phi_bar)
         if case.seed is not None and "seed" in profiles.columns:
             sel = sel & (pl.col("seed") == case.seed)
@@ -97,14 +97,12 @@ def zone_errors(cases: Sequence[Any], profiles: pl.DataFrame) -> pl.DataFrame:
             if m.height != t.height:
                 raise bad("profiles", f"{m.height} bins for {case.name}",
                           f"the DEM run's {t.height} bins")
-            du, mphi = m["du"].to_numpy(), m["phi"].to_numpy()
             s_du, s_phi = _half_band(m, "du"), _half_band(m, "phi")
-            for zone, idx in zone_bins(t).items():
+            zones = zone_residuals(t, m["du"].to_numpy(), m["phi"].to_numpy())
+            for zone, (idx, r_u, r_phi) in zones.items():
                 eu, su = misfit_with_error(
-                    (du[idx] - (u[idx] - u[0])) / span,
-                    np.sqrt(s_du[idx] ** 2 + u_se[idx] ** 2 + u_se[0] ** 2) / abs(span))
-                ep, sp = misfit_with_error(mphi[idx] - phi[idx],
-                                           np.sqrt(s_phi[idx] ** 2 + phi_se[idx] ** 2))
+                    r_u, np.sqrt(s_du[idx] ** 2 + u_se[idx] ** 2 + u_se[0] ** 2) / span)
+                ep, sp = misfit_with_error(r_phi, np.sqrt(s_phi[idx] ** 2 + phi_se[idx] ** 2))
                 rows.append({"W": case.W, "phi_bar": case.phi_bar, "seed": case.seed,
                              "model": model[0], "zone": zone, "n_bins": int(idx.size),
                              "u_rel": eu, "u_rel_se": su, "phi_abs": ep, "phi_abs_se": sp})
