@@ -167,3 +167,44 @@ def test_reanalyse_calls_the_same_stop_rule(campaign):
     assert reanalyse(Scripted(), Point, Plan(t_max=20.0), out) == 1
     names = pl.read_parquet(out / "points.parquet")["name"].to_list()
     assert "runs_out" not in names and "arrests" in names
+
+
+class Ruled(Scripted):
+    """Scripted, with rows written before its stop rule (no ``rule`` field) not done."""
+
+    def row(self, point: Point, plan: Plan, tables: Mapping[str, pa.Table],
+            context: Mapping[str, Any]) -> dict[str, Any]:
+        return {**super().row(point, plan, tables, context), "rule": 1}
+
+    def current(self, row: Mapping[str, Any]) -> bool:
+        return row.get("rule") is not None
+
+
+def test_a_row_from_before_the_stop_rule_is_run_again_and_replaced(tmp_path: Path):
+    pts = POINTS[:2]
+    run_points(Scripted(), pts, Plan(), tmp_path, workers=1, log=lambda *_: None)
+    assert pl.read_parquet(tmp_path / "samples.parquet").height == 4
+    # the work directories of the old rows are gone (another machine): runs start afresh
+    for p in pts:
+        for f in (tmp_path / "work" / p.key).iterdir():
+            f.unlink()
+    said: list[str] = []
+    d = run_points(Ruled(), pts, Plan(), tmp_path, workers=1, log=said.append)
+    assert said[0] == ("campaign: 2 points, 0 done, 2 to run (2 of them again: rows from "
+                       "before the present stop rule)")
+    # one row per point, the new one, in every table
+    assert d.height == 2 and d["rule"].to_list() == [1, 1]
+    s = pl.read_parquet(tmp_path / "samples.parquet")
+    assert s.height == 4 and sorted(set(s["name"].to_list())) == ["arrests", "runs_out"]
+    said.clear()
+    run_points(Ruled(), pts, Plan(), tmp_path, workers=1, log=said.append)
+    assert said == ["campaign: 2 points, 2 done, 0 to run"]
+
+
+def test_the_cell_campaign_counts_only_rows_its_stop_rule_judged():
+    from granflow.studies._campaign.cell import STUDY
+
+    assert STUDY.current({"state": "flowing", "tau_max": 12.0})
+    assert STUDY.current({"state": "runaway", "tau_max": math.nan})  # judged, no tau
+    assert not STUDY.current({"state": "flowing", "tau_max": None})  # before the rule
+    assert not STUDY.current({"state": "flowing"})

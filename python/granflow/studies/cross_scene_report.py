@@ -41,7 +41,7 @@ from granflow.continuum.verdict import (
 )
 
 from ._campaign import md_table, pm_column
-from ._campaign.cell import Point, channel_material
+from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import with_defaults
 
 MODELS = ("local", "nonlocal")
@@ -511,10 +511,25 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
               "law measured separately;",
               *(f"* calibration below I = {pred.cal[p].law.I_min:.2g} at p d/kn = {p:g}: the "
                 "full plan's rate-controlled points (cross_scene.RATE_I) reach it, not run yet;"
-                for p in short_of_channel(pred.cal)), ""]
+                for p in short_of_channel(pred.cal)),
+              *_before_the_rule(raw), ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def _before_the_rule(raw: pl.DataFrame) -> list[str]:
+    """A bullet for the calibration runs written before the present stop rule (those
+    :meth:`granflow.studies._campaign.cell.CellStudy.current` does not count as done)."""
+    old = [r for r in raw.iter_rows(named=True) if not STUDY.current(r)]
+    if not old:
+        return []
+    return [f"* {len(old)} of the {raw.height} cell runs above predate the stop rule of the "
+            "002 campaign (the rules of \"Error bars that hold across replicas\": a "
+            "stationarity test, 20 correlation times of the slowest quantity, no SE on fewer "
+            "than 10 blocks); their SEs are those of their short runs (the coverage audit "
+            "above). `--full` runs them again under the rule, and each new row replaces its "
+            "old one;"]
 
 
 def verdict_lines(table: pl.DataFrame) -> list[str]:

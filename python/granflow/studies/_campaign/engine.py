@@ -72,12 +72,30 @@ def point_of(cls: type, row: Mapping[str, Any]) -> Any:
     return cls(**{f.name: row[f.name] for f in dataclasses.fields(cls) if f.name in row})
 
 
-def done_keys(out: Path, cls: type) -> set[str]:
-    """Keys of the points already in ``out/points.parquet``."""
+def done_keys(out: Path, cls: type, study: Study | None = None) -> set[str]:
+    """Keys of the points already in ``out/points.parquet`` (with ``study``: those whose row
+    counts as done, :meth:`Study.current`)."""
     f = out / "points.parquet"
     if not f.exists():
         return set()
-    return {point_of(cls, r).key for r in pl.read_parquet(f).iter_rows(named=True)}
+    return {point_of(cls, r).key for r in pl.read_parquet(f).iter_rows(named=True)
+            if study is None or study.current(r)}
+
+
+def drop_key(f: Path, cls: type, key: str) -> None:
+    """Remove the rows of the point ``key`` from the table ``f`` (a point's row, or its rows
+    of a further table, about to be replaced by a new run's)."""
+    if not f.exists():
+        return
+    d = pl.read_parquet(f)
+    keys = [point_of(cls, r).key for r in d.iter_rows(named=True)]
+    if key not in keys:
+        return
+    rest = list(d.filter(pl.Series([k != key for k in keys])).iter_rows(named=True))
+    if rest:
+        write_rows(f, rest, point=cls)
+    else:
+        f.unlink()
 
 
 def fmt(row: Mapping[str, Any], key: str, spec: str = ".4g") -> str:
@@ -135,6 +153,12 @@ class Study:
         fields), e.g. "converged", "arrested" or "budget"; None to go on. ``history``: the
         states of the earlier stints, oldest first."""
         raise NotImplementedError
+
+    def current(self, row: Mapping[str, Any]) -> bool:
+        """Whether a finished ``row`` of the dataset counts as done: judged by the present
+        stop rule. One that does not (written before the rule) is run again, and the new row
+        replaces it (:func:`run_points`)."""
+        return True
 
 
 def error_state(exc: GranflowError) -> str:
@@ -266,8 +290,10 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
                workers: int | None = None, scheduler: str | None = None,
                threads: int | None = None, describe: Callable[[dict[str, Any]], str] = str,
                log: Callable[[str], Any] = print, name: str = "campaign") -> pl.DataFrame:
-    """Run (:func:`run_point`) the ``points`` not yet in ``out/points.parquet`` (local process
-    pool by default, or a Dask scheduler); each finished row is appended there at once, and the
+    """Run (:func:`run_point`) the ``points`` not yet done in ``out/points.parquet`` (local
+    process pool by default, or a Dask scheduler): those it lacks, and those whose row is not
+    :meth:`Study.current` (the new row replaces the old, in every table); each finished row is
+    appended there at once, and the
     list of rows under each key ``k`` of ``study.tables`` to ``out/<study.tables[k]>.parquet``.
     ``threads`` per point (default cores/workers; :func:`granflow.study.map_tasks`).
     Returns the whole points table."""
@@ -276,16 +302,25 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
     outp = Path(out)
     outp.mkdir(parents=True, exist_ok=True)
     cls = type(points[0]) if points else object
-    done = done_keys(outp, cls) if points else set()
+    done = done_keys(outp, cls, study) if points else set()
+    stale = (done_keys(outp, cls) - done) if points else set()
     todo = [p for p in points if p.key not in done]
-    log(f"{name}: {len(points)} points, {len(points) - len(todo)} done, {len(todo)} to run")
+    rerun = sum(p.key in stale for p in todo)
+    log(f"{name}: {len(points)} points, {len(points) - len(todo)} done, {len(todo)} to run"
+        + (f" ({rerun} of them again: rows from before the present stop rule)"
+           if rerun else ""))
     args = [(study, p, plan, str(outp / "work")) for p in todo]
     for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler,
                             threads=threads):
         extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
+        key = point_of(cls, row).key
+        if key in stale:
+            for f in (outp / "points.parquet",
+                      *(outp / f"{stem}.parquet" for stem in extras)):
+                drop_key(f, cls, key)
         write_rows(outp / "points.parquet", [row], append=True, point=cls)
         for stem, rows in extras.items():
             write_rows(outp / f"{stem}.parquet", rows, append=True, point=cls)
-        log(f"  {point_of(cls, row).key}: {describe(row)}")
+        log(f"  {key}: {describe(row)}")
     f = outp / "points.parquet"
     return pl.read_parquet(f) if f.exists() else pl.DataFrame()
