@@ -113,6 +113,27 @@ def test_select_runs_a_piece_of_a_plan_with_its_settings():
             select(plan, bad)
 
 
+def test_select_runs_a_piece_but_reports_on_the_whole_plan(tmp_path):
+    from granflow.studies._campaign.command import cli
+
+    plan = full_plan()
+    seen: dict[str, object] = {}
+
+    def run(p, out, **kw):
+        seen["run"] = p
+
+    def report(out, path, p, **kw):
+        seen["report"] = p
+        return path
+
+    cli(["--full", "--out", str(tmp_path), "--select", r"_I0\.001_s1$"], module="m",
+        description="d", plans={"full": (full_plan, "")}, reanalyse=lambda o, p: 0,
+        run_campaign=run, write_report=report)
+    assert len(seen["run"].points) == 2  # type: ignore[attr-defined]
+    # (what is left of the campaign, and its cost, are the whole plan's)
+    assert seen["report"].points == plan.points  # type: ignore[attr-defined]
+
+
 def _on_law(tau: float, i: float, seed: int, ig: float, shift: float = 0.0,
             rng: np.random.Generator | None = None) -> dict[str, float | int | str | bool]:
     """A steady calibration run on mu = 0.35 + 0.3 I/(I + 0.1), phi = 0.59 - 0.15 I (with

@@ -916,8 +916,9 @@ UNMEASURED_RATE = 4.15e6
 
 def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     """The plan's runs not yet in ``out``, per (W, k_n, B): how many, and their core-hours at
-    ``rate`` (UNMEASURED_RATE where None) from the least each must run (t_min, or the
-    minimum average) to its cap (t_max), less what a started run has done (its series in
+    ``rate`` or UNMEASURED_RATE, the slower (UNMEASURED_RATE where None), from the least
+    each must run (t_min, or the minimum average) to its cap (t_max), less what a started
+    run has done (its series in
     ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
     the plan is done."""
     from ._campaign import done_keys
@@ -930,7 +931,10 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     left = [p for p in planned if p.key not in done]
     if not left:
         return []
-    r = UNMEASURED_RATE if rate is None else rate
+    # (a developed wide channel steps slower per particle than a narrow one, W = 60 at about
+    # half W = 20's rate (benchmarks/NOTES.md, 2026-11-27 sixth session): the slower of the
+    # dataset's rate and the W = 150 run's, so that the wide runs are not underestimated)
+    r = UNMEASURED_RATE if rate is None else min(rate, UNMEASURED_RATE)
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
     for p in left:
         t_cap, t_avg = plan.limits(p)
@@ -953,6 +957,9 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     return ["## Not yet run", "",
             f"{len(left)} runs of the {plan.name} plan, at "
             + (f"{r:.3g} particle-steps per core-second (measured on this dataset)"
+               if rate is not None and r == rate else
+               f"{r:.3g} particle-steps per core-second (the W = 150 run's stints, "
+               "benchmarks/NOTES.md: slower than this dataset's narrower runs)"
                if rate is not None else
                f"{r:.3g} particle-steps per core-second (no finished point here yet: "
                "the W = 150 run's stints, benchmarks/NOTES.md)")

@@ -43,12 +43,13 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         ap.add_argument(f"--{name}", default=default, help=f"{text} (default {default})")
     a = ap.parse_args(list(argv) if argv is not None else None)
     chosen = next((n for n in plans if getattr(a, n)), "quick")
-    plan = plans[chosen][0]()
+    whole = plans[chosen][0]()
+    plan = whole
     if a.select is not None:
         from granflow.errors import ParameterError
 
         try:
-            plan = select(plan, a.select)
+            plan = select(whole, a.select)
         except ParameterError as e:
             ap.error(str(e))
     out = Path(a.out or f"results/{stem}_{plan.name}")
@@ -56,7 +57,8 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
     if not a.only_report:
         run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler, threads=a.threads)
-    path = write_report(out, Path(a.report) if a.report else out / "report.md", plan,
+    # (the report is of the whole plan: what is left of it, its cost, whatever was selected)
+    path = write_report(out, Path(a.report) if a.report else out / "report.md", whole,
                         **{k: getattr(a, k) for k in options or {}})
     print(f"report: {path}")
 
