@@ -935,6 +935,9 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     # half W = 20's rate (benchmarks/NOTES.md, 2026-11-27 sixth session): the slower of the
     # dataset's rate and the W = 150 run's, so that the wide runs are not underestimated)
     r = UNMEASURED_RATE if rate is None else min(rate, UNMEASURED_RATE)
+    source = ("measured on this dataset" if r == rate else "the W = 150 run's stints, "
+              "benchmarks/NOTES.md: " + ("no finished point here yet" if rate is None else
+                                         "slower than this dataset's narrower runs"))
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
     for p in left:
         t_cap, t_avg = plan.limits(p)
@@ -955,14 +958,8 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     lo, hi = float(tab["core-hours (least)"].sum()), float(tab["core-hours (cap)"].sum())
     longest = float(tab["longest run (h, 1 core)"].max())  # type: ignore[arg-type]
     return ["## Not yet run", "",
-            f"{len(left)} runs of the {plan.name} plan, at "
-            + (f"{r:.3g} particle-steps per core-second (measured on this dataset)"
-               if rate is not None and r == rate else
-               f"{r:.3g} particle-steps per core-second (the W = 150 run's stints, "
-               "benchmarks/NOTES.md: slower than this dataset's narrower runs)"
-               if rate is not None else
-               f"{r:.3g} particle-steps per core-second (no finished point here yet: "
-               "the W = 150 run's stints, benchmarks/NOTES.md)")
+            f"{len(left)} runs of the {plan.name} plan, at {r:.3g} particle-steps per "
+            f"core-second ({source})"
             + ": each from the least it must run (a branch its minimum average; the others "
             f"t_min or the minimum average) to its cap (t = {plan.t_max:g}), less what a "
             "started run has done:", "",
