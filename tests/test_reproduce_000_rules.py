@@ -328,6 +328,29 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
     assert remaining(tmp_path, rp.Plan("none", ()), 4e6) == []
 
 
+def test_runs_still_to_do_and_the_paper_scale_are_costed_at_the_slower_rate():
+    from pathlib import Path
+
+    from granflow.studies.reproduce_000_report import UNMEASURED_RATE, _cost_section, planning_rate
+
+    assert planning_rate(None)[0] == UNMEASURED_RATE
+    assert planning_rate(0.5 * UNMEASURED_RATE) == (0.5 * UNMEASURED_RATE,
+                                                    "measured on this dataset")
+    fast, why = planning_rate(2 * UNMEASURED_RATE)
+    assert fast == UNMEASURED_RATE and "slower than this dataset" in why
+    # the committed widths dataset (W = 20 only) steps faster than a wide channel: its
+    # paper-scale estimate is costed at the wide rate, as its runs left are
+    d = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000_widths"
+    points = pl.read_parquet(d / "points.parquet")
+    text, rate = _cost_section(points, rp.paper_plan())
+    assert rate > UNMEASURED_RATE
+    paper = next(ln for ln in text if ln.startswith("000 runs W = 60-150"))
+    assert f"at {UNMEASURED_RATE:.3g} particle-steps per core-second" in paper
+    hours = float(paper.split("about ")[1].split(" core-hours")[0].replace(",", ""))
+    steps = float(paper.split("runs to t = 2600, ")[1].split(" particle-steps")[0])
+    assert hours == pytest.approx(steps / UNMEASURED_RATE / 3600, rel=2e-3)
+
+
 def test_the_committed_pour_dataset_resumes_though_its_rows_predate_point_prep():
     from pathlib import Path
 

@@ -914,9 +914,22 @@ def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
 UNMEASURED_RATE = 4.15e6
 
 
+def planning_rate(rate: float | None) -> tuple[float, str]:
+    """The throughput that runs still to do are costed at, and its source: the slower of the
+    dataset's measured ``rate`` (None: no finished point) and UNMEASURED_RATE."""
+    # (a developed wide channel steps slower per particle than a narrow one, W = 60 at about
+    # half W = 20's rate (benchmarks/NOTES.md, 2026-11-27 sixth session): so that the wide
+    # runs are not underestimated from narrow ones)
+    r = UNMEASURED_RATE if rate is None else min(rate, UNMEASURED_RATE)
+    source = ("measured on this dataset" if r == rate else "the W = 150 run's stints, "
+              "benchmarks/NOTES.md: " + ("no finished point here yet" if rate is None else
+                                         "slower than this dataset's narrower runs"))
+    return r, source
+
+
 def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     """The plan's runs not yet in ``out``, per (W, k_n, B): how many, and their core-hours at
-    ``rate`` or UNMEASURED_RATE, the slower (UNMEASURED_RATE where None), from the least
+    ``planning_rate(rate)``, from the least
     each must run (t_min, or the minimum average) to its cap (t_max), less what a started
     run has done (its series in
     ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
@@ -931,13 +944,7 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     left = [p for p in planned if p.key not in done]
     if not left:
         return []
-    # (a developed wide channel steps slower per particle than a narrow one, W = 60 at about
-    # half W = 20's rate (benchmarks/NOTES.md, 2026-11-27 sixth session): the slower of the
-    # dataset's rate and the W = 150 run's, so that the wide runs are not underestimated)
-    r = UNMEASURED_RATE if rate is None else min(rate, UNMEASURED_RATE)
-    source = ("measured on this dataset" if r == rate else "the W = 150 run's stints, "
-              "benchmarks/NOTES.md: " + ("no finished point here yet" if rate is None else
-                                         "slower than this dataset's narrower runs"))
+    r, source = planning_rate(rate)
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
     for p in left:
         t_cap, t_avg = plan.limits(p)
@@ -981,7 +988,8 @@ def _cost_section(points: pl.DataFrame, paper: Any) -> tuple[list[str], float]:
                      columns=[pl.col("n").max().alias("particles"),
                               pl.col("prep_seconds").max().alias("longest preparation (s)")],
                      sort=["kn", "W"], prep="prep_seconds")
-    est = paper_scale_estimate(paper.points, _particle_steps(paper), rate)
+    r, source = planning_rate(rate)
+    est = paper_scale_estimate(paper.points, _particle_steps(paper), r)
     return ["## Cost", "",
             f"Measured throughput {rate:.3g} particle-steps per core-second (one thread "
             "a point, two points at a time on this 2-core machine; preparation not "
@@ -996,10 +1004,12 @@ def _cost_section(points: pl.DataFrame, paper: Any) -> tuple[list[str], float]:
             "averages over t = 2000-2600. `--paper` (reproduce_000.paper_plan) is that "
             f"campaign, W = 60, 80, 100, 125, 150 x four φ̄ x 3 seeds: {est['runs']:.0f} "
             f"runs to t = {paper.t_max:g}, {est['particle-steps']:.3g} particle-steps, "
-            f"about {est['core-hours']:,.0f} core-hours at the measured throughput "
+            f"about {est['core-hours']:,.0f} core-hours at {r:.3g} particle-steps per "
+            f"core-second ({source}; k_n = 1e6's smaller step builds the lists about three times "
+            "less often per step, which this does not credit) "
             f"({est['core-hours'] / 64:,.0f} hours on 64 cores; fewer where a run "
             "arrests or meets its SE target early).", "",
-            *_per_point_cost(paper, rate),
+            *_per_point_cost(paper, r),
             *dask_recipe("granflow.studies.reproduce_000", "results/paper_000", "24:00:00")], rate
 
 
