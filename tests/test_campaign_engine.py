@@ -208,3 +208,22 @@ def test_the_cell_campaign_counts_only_rows_its_stop_rule_judged():
     assert STUDY.current({"state": "runaway", "tau_max": math.nan})  # judged, no tau
     assert not STUDY.current({"state": "flowing", "tau_max": None})  # before the rule
     assert not STUDY.current({"state": "flowing"})
+
+
+def test_cost_counts_cpu_time_where_recorded_and_wall_time_where_not():
+    from granflow.studies._campaign import cost
+
+    # a: shared its core (wall twice its CPU time); b: before cpu_seconds (null); c: NaN
+    pts = pl.DataFrame({"g": ["x", "x", "y"], "n": [100, 100, 200], "steps": [10, 20, 5],
+                        "wall_seconds": [20.0, 4.0, 3.0], "cpu_seconds": [10.0, None, math.nan],
+                        "prep": [2.0, 0.0, math.nan]})
+    per, rate = cost(pts, ["g"], "n", "steps")
+    assert per["core-hours"].to_list() == pytest.approx([14.0 / 3600, 3.0 / 3600])
+    assert per["longest point (s)"].to_list() == [20.0, 3.0]
+    assert rate == pytest.approx((1000 + 2000 + 1000) / 17.0)
+    # the preparation's share of a point's wall time comes off its core time
+    _, run_rate = cost(pts, ["g"], "n", "steps", prep="prep")
+    assert run_rate == pytest.approx(4000 / (10.0 * 0.9 + 4.0 + 3.0))
+    # a dataset from before cpu_seconds: wall time throughout
+    per, _ = cost(pts.drop("cpu_seconds"), ["g"], "n", "steps")
+    assert per["core-hours"].to_list() == pytest.approx([24.0 / 3600, 3.0 / 3600])

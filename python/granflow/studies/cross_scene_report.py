@@ -40,7 +40,7 @@ from granflow.continuum.verdict import (
     zone_errors,
 )
 
-from ._campaign import md_table, pm_column
+from ._campaign import core_seconds, md_table, pm_column
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import with_defaults
 
@@ -387,7 +387,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
                                    figdir / f"W{case.W:g}_phi{case.phi_bar:g}.png", case.seed))
     se = (with_defaults(pl.read_parquet(out / "se_vs_time.parquet"), Point)
           if (out / "se_vs_time.parquet").exists() else pl.DataFrame())
-    wall = float(points["wall_seconds"].sum())
+    core = float(points.select(core_seconds(points).sum()).item())
     mat = channel_material()
     law = mat.law()
     assert law.kn is not None and law.kt is not None and law.e_n is not None
@@ -413,8 +413,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         f"`{channel}/points.parquet` and `profiles.parquet` (the reproduce_000 campaign, kn = "
         "1e5).", "",
         "## Time", "",
-        f"* calibration: {points.height} cell runs, {wall:.0f} s of wall time in all "
-        f"({wall / 3600:.2f} core-hours; one thread a run);",
+        f"* calibration: {points.height} cell runs, {core / 3600:.2f} core-hours in all "
+        "(one thread a run; CPU time where recorded, else wall time);",
         f"* fits, continuum solutions, bands and amplitude fits: {pred.seconds:.0f} s.", "",
         "## 1. Calibration in the cell, with the channel's material", "",
         "granflow.scenes.cell.ShearCell (stress-controlled, compacted start)"

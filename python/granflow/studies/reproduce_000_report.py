@@ -993,12 +993,12 @@ def _cost_section(points: pl.DataFrame, paper: Any) -> tuple[list[str], float]:
     return ["## Cost", "",
             f"Measured throughput {rate:.3g} particle-steps per core-second (one thread "
             "a point, two points at a time on this 2-core machine; preparation not "
-            "counted), from each point's wall time: when the machine ran more than the two "
-            "points (tests, builds), that overstates its core time, so the core-hours here "
-            "and below are upper bounds.", "",
+            "counted), from each point's CPU time where recorded, else its wall time (which "
+            "overstates the core time of a point that shared its core with tests or builds: "
+            "an upper bound); longest point: wall time.", "",
             md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f",
                            "longest preparation (s)": ".1f", "kn": ".0e"}), "",
-            f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
+            f"Total: {per['core-hours'].sum():.2f} core-hours.", "",
             "## The paper-scale campaign (recipe)", "",
             "000 runs W = 60-150, B = 40, H = 60 + ΔH, φ̄ = 0.59-0.62 at k_n = 1e6 and "
             "averages over t = 2000-2600. `--paper` (reproduce_000.paper_plan) is that "

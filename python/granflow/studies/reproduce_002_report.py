@@ -930,10 +930,12 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                            for p, (v, m) in medians.items())
     lines += ["## Cost", "",
               f"Measured throughput {rate:.3g} particle-steps per core-second (one thread a "
-              "point, two points at a time on this 2-core machine; compaction not counted).",
+              "point, two points at a time on this 2-core machine; compaction not counted), "
+              "from each point's CPU time where recorded, else its wall time (an upper bound "
+              "where a point shared its core); longest point: wall time.",
               "", md_table(per, {"core-hours": ".3f", "longest point (s)": ".0f",
                                  "p_ext": ".0e"}), "",
-              f"Total: {points['wall_seconds'].sum() / 3600:.2f} core-hours.", "",
+              f"Total: {per['core-hours'].sum():.2f} core-hours.", "",
               *_remaining(points, plan, rate),
               "## The paper-scale campaign (recipe)", "",
               "002 runs N = 1e4, p_ext in {1e-4, 1e-5, 1e-6}, 14 mu_s, tau/p 0-1.2 and 3 "

@@ -23,6 +23,7 @@ from .engine import (
     write_rows,
 )
 from .report import (
+    core_seconds,
     cost,
     dask_recipe,
     md_table,
@@ -32,6 +33,6 @@ from .report import (
     pm_column,
 )
 
-__all__ = ["Study", "cli", "cost", "dask_recipe", "done_keys", "error_state", "fmt",
+__all__ = ["Study", "cli", "core_seconds", "cost", "dask_recipe", "done_keys", "error_state", "fmt",
            "md_table", "paper_scale_estimate", "plot_campaign_se", "pm", "pm_column", "point_of",
            "reanalyse", "run_point", "run_points", "write_rows"]

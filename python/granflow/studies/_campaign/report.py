@@ -1,6 +1,6 @@
 """What the campaigns' reports share: markdown helpers (:func:`md_table`, :func:`pm`,
 :func:`dask_recipe`), the SE-against-averaging-time figure (:func:`plot_campaign_se`), and the
-cost of a campaign and of a plan at the measured throughput (:func:`cost`,
+cost of a campaign and of a plan at the measured throughput (:func:`core_seconds`, :func:`cost`,
 :func:`paper_scale_estimate`)."""
 
 from __future__ import annotations
@@ -108,19 +108,34 @@ def plot_campaign_se(se: pl.DataFrame, path: Path, columns: Sequence[str],
     return save_figure(fig, path, dpi=100)
 
 
+def core_seconds(points: pl.DataFrame) -> pl.Expr:
+    """Each point's core-seconds: its process's CPU time (``cpu_seconds``, all its threads)
+    where recorded, else its wall time. A point that shared its core with another process
+    (tests, a build, a third run) waited: its wall time overstates what it would take on an
+    otherwise idle core, its CPU time does not (on an idle core the two agree to ~1 %)."""
+    wall = pl.col("wall_seconds")
+    if "cpu_seconds" not in points.columns:
+        return wall
+    cpu = pl.col("cpu_seconds")
+    return pl.when(cpu.is_not_null() & cpu.is_finite() & (cpu > 0)).then(cpu).otherwise(wall)
+
+
 def cost(points: pl.DataFrame, by: Sequence[str], particles: str, steps: str, *,
          columns: Sequence[pl.Expr] = (), sort: Sequence[str] | None = None,
          prep: str | None = None) -> tuple[pl.DataFrame, float]:
     """Per group of ``by``: points, the further ``columns`` (aggregations), core-hours (one
-    core a point) and the longest point's wall seconds, sorted by ``sort`` (default ``by``);
-    and the throughput in particle-steps (``particles`` x ``steps`` columns) per core-second,
-    of the runs only when ``prep`` names the preparation's seconds."""
-    d = points.with_columns((pl.col(particles) * pl.col(steps)).alias("particle_steps"))
+    core a point, :func:`core_seconds`) and the longest point's wall seconds, sorted by
+    ``sort`` (default ``by``); and the throughput in particle-steps (``particles`` x ``steps``
+    columns) per core-second, of the runs only when ``prep`` names the preparation's (wall)
+    seconds: a point's core-seconds less the preparation's share of its wall time."""
+    d = points.with_columns((pl.col(particles) * pl.col(steps)).alias("particle_steps"),
+                            core_seconds(points).alias("core_seconds"))
     per = d.group_by(list(by), maintain_order=True).agg(
         pl.len().alias("points"), *columns,
-        (pl.col("wall_seconds").sum() / 3600).alias("core-hours"),
+        (pl.col("core_seconds").sum() / 3600).alias("core-hours"),
         pl.col("wall_seconds").max().alias("longest point (s)")).sort(list(sort or by))
-    run = d["wall_seconds"] - d[prep].fill_nan(0.0) if prep else d["wall_seconds"]
+    run = (d["core_seconds"] * (1.0 - d[prep].fill_nan(0.0) / d["wall_seconds"]) if prep
+           else d["core_seconds"])
     rate = float(d["particle_steps"].sum()) / float(run.sum())
     return per, rate
 
