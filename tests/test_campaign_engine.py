@@ -227,3 +227,25 @@ def test_cost_counts_cpu_time_where_recorded_and_wall_time_where_not():
     # a dataset from before cpu_seconds: wall time throughout
     per, _ = cost(pts.drop("cpu_seconds"), ["g"], "n", "steps")
     assert per["core-hours"].to_list() == pytest.approx([24.0 / 3600, 3.0 / 3600])
+
+
+def test_the_cell_reports_runs_left_count_rows_from_before_the_rule_as_to_run():
+    from pathlib import Path
+
+    from granflow.studies import reproduce_002 as r2
+    from granflow.studies.reproduce_002_report import _remaining
+
+    d = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_002"
+    points = pl.read_parquet(d / "points.parquet")
+    plan = r2.full_plan()
+
+    def left(pts: pl.DataFrame) -> int:
+        lines = _remaining(pts, plan, 2e7)
+        return int(lines[0].split("Not yet run: ")[1].split(" points")[0]) if lines else 0
+
+    n = left(points)
+    assert n == len(plan.points) - points.height
+    # a finished row without tau_max predates the stop rule: the campaign runs it again
+    old = points.with_columns(pl.when(pl.int_range(pl.len()) < 3).then(None)
+                              .otherwise(pl.col("tau_max")).alias("tau_max"))
+    assert left(old) == n + 3

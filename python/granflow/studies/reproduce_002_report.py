@@ -21,12 +21,14 @@ from granflow.analysis.replicas import DISAGREE_P, replica_mean
 from ._campaign import (
     cost,
     dask_recipe,
+    keys_done,
     md_table,
     paper_scale_estimate,
     plot_campaign_se,
     pm,
     pm_column,
 )
+from ._campaign.cell import STUDY, Point
 from .reproduce_002_figures import plot_figures
 
 #: the laws' parameters, in the order of the report's table
@@ -782,12 +784,12 @@ def points_markdown(pool: pl.DataFrame) -> str:
 
 
 def _remaining(points: pl.DataFrame, plan: Any, rate: float) -> list[str]:
-    """The plan's points not yet in ``points`` and their estimated core-hours (the median
-    steps of their pressure, :func:`median_steps`, at the measured ``rate``), as report
-    lines; none when the plan is done."""
-    done = {(r["mu_s"], r["N"], r["p_ext"], r["tau_ratio"], r["seed"])
-            for r in points.iter_rows(named=True)}
-    left = [q for q in plan.points if (q.mu_s, q.N, q.p_ext, q.tau_ratio, q.seed) not in done]
+    """The plan's points not done in ``points`` (absent, or with a row from before the stop
+    rule: the campaign runs them again, :meth:`CellStudy.current`) and their estimated
+    core-hours (the median steps of their pressure, :func:`median_steps`, at the measured
+    ``rate``), as report lines; none when the plan is done."""
+    done = keys_done(points, Point, STUDY)
+    left = [q for q in plan.points if q.key not in done]
     if not left:
         return []
     med = {p: median_steps(points, p) for p in {q.p_ext for q in left}}

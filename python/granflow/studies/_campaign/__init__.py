@@ -16,6 +16,7 @@ from .engine import (
     done_keys,
     error_state,
     fmt,
+    keys_done,
     point_of,
     reanalyse,
     run_point,
@@ -33,6 +34,6 @@ from .report import (
     pm_column,
 )
 
-__all__ = ["Study", "cli", "core_seconds", "cost", "dask_recipe", "done_keys", "error_state", "fmt",
-           "md_table", "paper_scale_estimate", "plot_campaign_se", "pm", "pm_column", "point_of",
-           "reanalyse", "run_point", "run_points", "write_rows"]
+__all__ = ["Study", "cli", "core_seconds", "cost", "dask_recipe", "done_keys", "error_state",
+           "fmt", "keys_done", "md_table", "paper_scale_estimate", "plot_campaign_se", "pm",
+           "pm_column", "point_of", "reanalyse", "run_point", "run_points", "write_rows"]

@@ -76,9 +76,12 @@ def done_keys(out: Path, cls: type, study: Study | None = None) -> set[str]:
     """Keys of the points already in ``out/points.parquet`` (with ``study``: those whose row
     counts as done, :meth:`Study.current`)."""
     f = out / "points.parquet"
-    if not f.exists():
-        return set()
-    return {point_of(cls, r).key for r in pl.read_parquet(f).iter_rows(named=True)
+    return keys_done(pl.read_parquet(f), cls, study) if f.exists() else set()
+
+
+def keys_done(points: pl.DataFrame, cls: type, study: Study | None = None) -> set[str]:
+    """:func:`done_keys` of a points table already read."""
+    return {point_of(cls, r).key for r in points.iter_rows(named=True)
             if study is None or study.current(r)}
 
 
