@@ -415,7 +415,7 @@ def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = 
     its later points; each finished point is appended there as it completes."""
     kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "threads": threads,
                           "describe": _describe, "log": log}
-    done = done_keys(Path(out), Point)
+    done = done_keys(Path(out), Point, STUDY)
     ready = tuple(b for b in plan.branches if b.parent in done)
     run_points(STUDY, (*ready, *plan.points), plan, out, name=plan.name, **kw)
     waiting = tuple(b for b in plan.branches if b not in ready)
