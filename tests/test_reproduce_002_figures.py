@@ -77,3 +77,31 @@ def test_fig7_paper_curves_are_the_laws_ratios():
             n1["--"], 4 * rh.reference_curve("mu3", grid, mu, offset=off) / mu1)
     # no paper constants at mu_s = 0.1: our fits' curve only
     assert [ls for _, ls in _curves("N0_tau", grid, 0.1, fits[0.3])] == ["-"]
+
+
+def test_the_constants_panels_draw_our_fitted_values_and_the_papers():
+    from dataclasses import replace
+
+    from granflow.studies.reproduce_002_figures import Panel, _constant_panel, _Style
+    from matplotlib.figure import Figure
+
+    pool = _pool((1e-4, 1e-5))
+    fits = _fits(pool)
+    style = _Style.of(pool, 2000)
+    ax = Figure().add_subplot()
+    assert _constant_panel(ax, fits, Panel("mu1", 1, "mu1_0", "c0"), style) == \
+        "mu1_0 against mu_s"
+    ys = [float(y) for ln in ax.get_lines() for y in np.atleast_1d(ln.get_ydata())]
+    for mu in (0.0, 0.3):
+        assert fits[mu]["mu1"].params["mu1_0"] in ys
+        # 002's mu1_0 (§4): 0.09 and 0.33
+        assert rh.reference_parameters(mu)["mu1_0"] in ys
+    assert not ax.texts
+    # an exponent whose error exceeds half its value is drawn open, the axis scaled without it
+    loose = dict(fits)
+    f = fits[0.3]["phi"]
+    loose[0.3] = {**fits[0.3], "phi": replace(f, errors={**f.errors, "a4": 10.0})}
+    ax = Figure().add_subplot()
+    _constant_panel(ax, loose, Panel("phi", 1, "a4", "exponent"), style)
+    assert "mu_s = 0.3" in ax.texts[0].get_text()
+    assert ax.get_ylim()[1] < f.params["a4"] + 10.0

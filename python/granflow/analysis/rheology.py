@@ -481,6 +481,10 @@ def pool_realizations(df: TableLike, by: Sequence[str]) -> pl.DataFrame:
 # --------------------------------------------------------------------------------------------
 # flow-law fits (section 4)
 # --------------------------------------------------------------------------------------------
+#: a fitted constant whose (scaled) error exceeds this fraction of its value is not determined
+UNDETERMINED = 0.5
+
+
 @dataclass
 class FitResult:
     """Weighted least-squares fit of a flow law (scipy ``curve_fit``, ``sigma`` = SE,

@@ -2,9 +2,10 @@
 3-8 from the campaign's pooled points, with our fits and the paper's curves.
 
 Every mu_s has a colour, every pressure p_ext a marker; points at a system size other than the
-fits' are open symbols. Figures 3 and 6 have 002's pressure-collapse panel (b): the distance
+fits' are open symbols. Figures 3-6 have 002's pressure-collapse panel (b): the distance
 from the quasi-static value (mu1 - mu1_0, phi_0 - phi) against I on log axes, all pressures, at
-the frictions where 002 draws it (mu_s = 0 and 0.3)."""
+the frictions where 002 draws it (mu_s = 0 and 0.3); and its panels (c) and (d): the fitted
+quasi-static value and exponent against mu_s, with 002's where it gives them."""
 
 from __future__ import annotations
 
@@ -26,30 +27,36 @@ __all__ = ["COLLAPSE_MU", "FIGURES", "Panel", "plot_figures"]
 
 @dataclass(frozen=True)
 class Panel:
-    """One panel: ``column`` against I**``power`` (log axis), y-axis ``label``; ``collapse``:
-    002's panel (b), the column's distance from our fitted quasi-static value against I on log
-    axes for the frictions :data:`COLLAPSE_MU`, all pressures."""
+    """One panel of ``column``, y-axis ``label``, by ``kind``: "law", the column against
+    I**``power`` (log axis); "collapse", 002's panel (b), its distance from our fitted
+    quasi-static value against I**power on log axes for the frictions :data:`COLLAPSE_MU`,
+    all pressures; "c0" and "exponent", 002's panels (c) and (d), that fitted value and the
+    law's exponent against mu_s."""
 
     column: str
     power: int
     label: str
-    collapse: bool = False
+    kind: str = "law"
 
 
 #: figures: (file, title, panels)
 FIGURES: tuple[tuple[str, str, tuple[Panel, ...]], ...] = (
     ("fig3_mu1.png", "fig. 3: mu1 = tau/p against I, (4.2)",
      (Panel("mu1", 1, "mu1 = tau/p"),
-      Panel("mu1", 1, "mu1 - mu1_0 (mu1_0: our fit)", collapse=True))),
+      Panel("mu1", 1, "mu1 - mu1_0 (mu1_0: our fit)", "collapse"),
+      Panel("mu1", 1, "mu1_0", "c0"), Panel("mu1", 1, "a1", "exponent"))),
     ("fig4_mu2.png", "fig. 4: mu2 = -N0/p against I^2, (4.4)",
      (Panel("mu2", 2, "mu2"),
-      Panel("mu2", 2, "mu2 - mu2_0 (mu2_0: our fit)", collapse=True))),
+      Panel("mu2", 2, "mu2 - mu2_0 (mu2_0: our fit)", "collapse"),
+      Panel("mu2", 2, "mu2_0", "c0"), Panel("mu2", 2, "a2", "exponent"))),
     ("fig5_mu3.png", "fig. 5: mu3 against I^2, (4.6)",
      (Panel("mu3", 2, "mu3"),
-      Panel("mu3", 2, "mu3_0 - mu3 (mu3_0: our fit)", collapse=True))),
+      Panel("mu3", 2, "mu3_0 - mu3 (mu3_0: our fit)", "collapse"),
+      Panel("mu3", 2, "mu3_0", "c0"), Panel("mu3", 2, "a3", "exponent"))),
     ("fig6_phi.png", "fig. 6: phi against I, (4.7)",
      (Panel("phi", 1, "phi"),
-      Panel("phi", 1, "phi_0 - phi (phi_0: our fit)", collapse=True))),
+      Panel("phi", 1, "phi_0 - phi (phi_0: our fit)", "collapse"),
+      Panel("phi", 1, "phi_0", "c0"), Panel("phi", 1, "a4", "exponent"))),
     ("fig7_normal_stress.png", "fig. 7: normal stress differences",
      (Panel("N0_tau", 1, "N0/tau (5.3)"), Panel("N1_tau", 1, "N1/tau (5.4)"))),
     ("fig8_fabric.png", "fig. 8: fabric and contacts",
@@ -280,6 +287,52 @@ def _collapse_panel(ax: Axes, pool: pl.DataFrame,
     return f"pressure collapse, mu_s = {', '.join(f'{m:g}' for m in mus)}\n({over})"
 
 
+def _constant_panel(ax: Axes, fits: Mapping[float, Mapping[str, rh.FitResult]], panel: Panel,
+                    style: _Style) -> str:
+    """002's panels (c) and (d): our fitted quasi-static value (``panel.kind`` "c0") or
+    exponent ("exponent") of ``panel.column``'s law against mu_s, with its error (scaled by
+    sqrt(chi2/dof) where that exceeds 1), and 002's value where it gives one (§4: mu_s = 0
+    and 0.3; a3 = 0.5 for all). A value whose error exceeds :data:`rh.UNDETERMINED` of it is
+    drawn open, and the axis is scaled to the determined ones. Returns the panel's title."""
+    from matplotlib.lines import Line2D
+
+    law = rh.LAWS[panel.column]
+    name = law.params[0] if panel.kind == "c0" else law.params[2]
+    kept: list[tuple[float, float, float]] = []
+    loose: list[tuple[float, float, float]] = []
+    paper: list[tuple[float, float]] = []
+    for mu in sorted(fits):
+        f = fits[mu].get(panel.column)
+        if f is not None and _ok(f):
+            v, e = f.params[name], f.errors_scaled[name]
+            (loose if not e <= rh.UNDETERMINED * abs(v) else kept).append((mu, v, e))
+        ref = rh.reference_parameters(mu).get(name, np.nan)
+        if np.isfinite(ref):
+            paper.append((mu, ref))
+    for rows, fill in ((kept, True), (loose, False)):
+        for mu, v, e in rows:
+            ax.errorbar([mu], [v], yerr=[e], fmt="o", ms=5, capsize=2,
+                        color=style.colours.get(mu, "0.3"), mfc=None if fill else "none")
+    if paper:
+        ax.plot(*zip(*paper, strict=True), "s", ms=8, mfc="none", mec="k", mew=1.2)
+    shown = [y for _, v, e in kept for y in (v - e, v + e)] + [v for _, v in paper]
+    if shown and loose:
+        pad = 0.15 * (max(shown) - min(shown) or abs(max(shown)) or 1.0)
+        ax.set_ylim(min(shown) - pad, max(shown) + pad)
+        ax.text(0.02, 0.02, "not determined (error > "
+                f"{rh.UNDETERMINED:.0%} of the value), open: mu_s = "
+                + ", ".join(f"{mu:g}" for mu, _, _ in loose), transform=ax.transAxes,
+                fontsize=6, va="bottom")
+    ax.set_xlabel("mu_s")
+    ax.set_ylabel(panel.label)
+    h = [Line2D([], [], color="0.35", marker="o", ls="none", label="our fit, all pressures")]
+    if paper:
+        h.append(Line2D([], [], color="k", marker="s", mfc="none", ls="none",
+                        label="paper 002 (§4)"))
+    ax.legend(handles=h, fontsize=6)
+    return f"{name} against mu_s"
+
+
 def plot_figures(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitResult]],
                  directory: Path, n: int = 2000) -> list[Path]:
     """Figures 3-8 (:data:`FIGURES`) as PNG files in ``directory``; returns their paths.
@@ -296,17 +349,22 @@ def plot_figures(pool: pl.DataFrame, fits: Mapping[float, Mapping[str, rh.FitRes
     paths = []
     style = _Style.of(pool, n) if pool.height else _Style({}, {}, n)
     for fname, title, panels in FIGURES:
-        fig = Figure(figsize=(5.6 * len(panels), 4.8))
+        # four panels as 002's: two rows of two
+        rows = 2 if len(panels) == 4 else 1
+        cols = len(panels) // rows
+        fig = Figure(figsize=(5.6 * cols, 4.8 * rows))
         for k, panel in enumerate(panels):
-            ax = fig.add_subplot(1, len(panels), k + 1)
+            ax = fig.add_subplot(rows, cols, k + 1)
             tag = f"({chr(ord('a') + k)}) " if len(panels) > 1 else ""
             if not pool.height or panel.column not in pool.columns:
                 ax.set_title(f"{tag}{panel.label}: no data", fontsize=9)
                 ax.set_xlabel("I" if panel.power == 1 else "I^2")
                 ax.set_ylabel(panel.label)
                 continue
-            if panel.collapse:
+            if panel.kind == "collapse":
                 sub = _collapse_panel(ax, pool, fits, panel, style)
+            elif panel.kind in ("c0", "exponent"):
+                sub = _constant_panel(ax, fits, panel, style)
             else:
                 _main_panel(ax, pool, fits, panel, style)
                 sub = f"{panel.label} against {'I' if panel.power == 1 else 'I^2'}"

@@ -36,7 +36,7 @@ PARAMS = (("A1", "mu1"), ("A2", "mu2"), ("A3", "mu3"), ("A4", "phi"), ("mu1_0", 
           ("a1", "mu1"), ("mu2_0", "mu2"), ("a2", "mu2"), ("mu3_0", "mu3"), ("a3", "mu3"),
           ("phi_0", "phi"), ("a4", "phi"))
 #: a fit error above this fraction of the value leaves the parameter undetermined
-UNDETERMINED = 0.5
+UNDETERMINED = rh.UNDETERMINED
 
 
 def _offset_phrase(off: pl.DataFrame, mu: float, col: str, p: float) -> str:
@@ -881,7 +881,13 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
               "(from the runs' own blocking SEs) and the between-replica SE (from their spread, "
               "with the Student small-sample factor), both given as (within / between); "
               "`granflow.analysis.replicas`.", "", points_markdown(pool), ""]
-    lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
+    lines += ["## Figures", "",
+              "Figs. 3-6 as 002 draws them: (a) the quantity against I, our fit (solid) and "
+              "002's curve (dashed, where §4 gives all its constants); (b) the pressure "
+              "collapse at mu_s = 0 and 0.3; (c) and (d) our fitted quasi-static value and "
+              "exponent against mu_s (all pressures, errors scaled by sqrt(chi2/dof) where that "
+              "exceeds 1; open: not determined) with 002's (§4) as squares.", ""]
+    lines += [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
     big = pool.filter(pl.col("N") == 10_000)
     if big.height:
         both = big.join(pool.filter(pl.col("N") == n_main), on=["mu_s", "p_ext", "tau_ratio"],
