@@ -363,3 +363,11 @@ def test_the_committed_pour_dataset_resumes_though_its_rows_predate_point_prep()
     # its runs are the full plan's pour points (prep's default), not new ones to run again
     assert keys and keys <= {p.key for p in (*plan.points, *plan.branches, *plan.later)}
     assert not any("_rain" in k for k in keys)
+
+
+def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path):
+    from granflow.studies.reproduce_000_report import remaining
+
+    text = "\n".join(remaining(tmp_path, rp.full_plan(), 4e6))
+    assert "The widths (`--widths`" in text and "carries this one's question on" in text
+    assert "carries" not in "\n".join(remaining(tmp_path, rp.widths_plan(), 4e6))

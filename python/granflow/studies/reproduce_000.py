@@ -135,6 +135,8 @@ class Plan:
     #: branches: the same, counted from the branch
     branch_t_max: float = 250.0
     branch_min_average: float = 100.0
+    #: the campaign that carries this one's question on (its report names it), "" if none
+    superseded_by: str = ""
 
     def limits(self, point: Point) -> tuple[float, float]:
         """(t_max, min_average) of ``point``."""
@@ -166,7 +168,9 @@ def full_plan() -> Plan:
     pts = tuple(Point(w, p, seed=s) for w in WIDTHS for p in PHIS for s in SEEDS)
     branches = tuple(b for s in SEEDS for b in _branches(Point(*STIFF_AT, seed=s), STIFF_KN))
     return Plan("full", pts, branches,
-                later=tuple(Point(100.0, p, seed=s) for p in PHIS for s in SEEDS))
+                later=tuple(Point(100.0, p, seed=s) for p in PHIS for s in SEEDS),
+                superseded_by="widths (`--widths`, docs/reproduce_000_widths.md: 000's own "
+                              "preparation, the rain, to t >= 1000 and W = 150)")
 
 
 #: issue 36's campaign (:func:`widths_plan`): 000's rain, widths to 150, the depth check and

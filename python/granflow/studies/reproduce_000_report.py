@@ -964,7 +964,11 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     tab = pl.DataFrame(sorted(rows.values(), key=lambda d: (-d["W"], d["k_n"], d["B"])))
     lo, hi = float(tab["core-hours (least)"].sum()), float(tab["core-hours (cap)"].sum())
     longest = float(tab["longest run (h, 1 core)"].max())  # type: ignore[arg-type]
+    after = getattr(plan, "superseded_by", "")
     return ["## Not yet run", "",
+            *([f"The {after} campaign carries this one's question on: the runs below are "
+               "what this plan would still run, for its own protocol only.", ""] if after
+              else []),
             f"{len(left)} runs of the {plan.name} plan, at {r:.3g} particle-steps per "
             f"core-second ({source})"
             + ": each from the least it must run (a branch its minimum average; the others "
