@@ -204,3 +204,15 @@ def test_cell_plot(tmp_path):
     p = plots.plot_cell_rheology(df, tmp_path / "cell.png", fits=fits, mu_s=0.3)
     data = p.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20000
+
+
+def test_a_constant_is_undetermined_when_its_error_exceeds_half_its_size():
+    from granflow.analysis.rheology import undetermined
+
+    assert not undetermined(0.30, 0.14)
+    assert undetermined(0.30, 0.16)
+    # beside a larger reference value the reference sets the size
+    assert not undetermined(0.05, 0.04, reference=0.09)
+    assert undetermined(-0.051, 0.059, reference=0.09)
+    # no finite error: not determined
+    assert undetermined(0.3, float("nan")) and undetermined(0.3, float("inf"))

@@ -485,6 +485,14 @@ def pool_realizations(df: TableLike, by: Sequence[str]) -> pl.DataFrame:
 UNDETERMINED = 0.5
 
 
+def undetermined(value: float, error: float, reference: float = math.nan) -> bool:
+    """Whether a fitted constant ``value`` +- ``error`` is not determined: its error exceeds
+    UNDETERMINED of its size, or of the ``reference`` value it is compared with where that is
+    larger (a small fit beside a large reference is not called determined), or is not finite."""
+    size = max(abs(value), abs(reference)) if math.isfinite(reference) else abs(value)
+    return not error <= UNDETERMINED * size
+
+
 @dataclass
 class FitResult:
     """Weighted least-squares fit of a flow law (scipy ``curve_fit``, ``sigma`` = SE,

@@ -929,11 +929,9 @@ def planning_rate(rate: float | None) -> tuple[float, str]:
 
 def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     """The plan's runs not yet in ``out``, per (W, k_n, B): how many, and their core-hours at
-    ``planning_rate(rate)``, from the least
-    each must run (t_min, or the minimum average) to its cap (t_max), less what a started
-    run has done (its series in
-    ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
-    the plan is done."""
+    ``planning_rate(rate)``, from the least each must run (t_min, or the minimum average) to
+    its cap (t_max), less what a started run has done (its series in ``out/work``); the
+    longest run's hours on one core; the recipe. Report lines; none when the plan is done."""
     from ._campaign import done_keys
 
     planned = (*plan.points, *plan.branches, *plan.later)

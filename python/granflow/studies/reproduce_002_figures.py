@@ -292,7 +292,7 @@ def _constant_panel(ax: Axes, fits: Mapping[float, Mapping[str, rh.FitResult]], 
     """002's panels (c) and (d): our fitted quasi-static value (``panel.kind`` "c0") or
     exponent ("exponent") of ``panel.column``'s law against mu_s, with its error (scaled by
     sqrt(chi2/dof) where that exceeds 1), and 002's value where it gives one (§4: mu_s = 0
-    and 0.3; a3 = 0.5 for all). A value whose error exceeds :data:`rh.UNDETERMINED` of it is
+    and 0.3; a3 = 0.5 for all). A value that is not determined (:func:`rh.undetermined`) is
     drawn open, and the axis is scaled to the determined ones. Returns the panel's title."""
     from matplotlib.lines import Line2D
 
@@ -305,7 +305,7 @@ def _constant_panel(ax: Axes, fits: Mapping[float, Mapping[str, rh.FitResult]], 
         f = fits[mu].get(panel.column)
         if f is not None and _ok(f):
             v, e = f.params[name], f.errors_scaled[name]
-            (loose if not e <= rh.UNDETERMINED * abs(v) else kept).append((mu, v, e))
+            (loose if rh.undetermined(v, e) else kept).append((mu, v, e))
         ref = rh.reference_parameters(mu).get(name, np.nan)
         if np.isfinite(ref):
             paper.append((mu, ref))

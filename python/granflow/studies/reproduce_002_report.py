@@ -35,8 +35,6 @@ from .reproduce_002_figures import plot_figures
 PARAMS = (("A1", "mu1"), ("A2", "mu2"), ("A3", "mu3"), ("A4", "phi"), ("mu1_0", "mu1"),
           ("a1", "mu1"), ("mu2_0", "mu2"), ("a2", "mu2"), ("mu3_0", "mu3"), ("a3", "mu3"),
           ("phi_0", "phi"), ("a4", "phi"))
-#: a fit error above this fraction of the value leaves the parameter undetermined
-UNDETERMINED = rh.UNDETERMINED
 
 
 def _offset_phrase(off: pl.DataFrame, mu: float, col: str, p: float) -> str:
@@ -316,7 +314,7 @@ def table_rows(fits: Mapping[float, Mapping[str, rh.FitResult]]) -> pl.DataFrame
             half = 0.5 * rh.printed_unit(name)
             z = interval_z(v, e, pv - half, pv + half)
             verdict = ("-" if not math.isfinite(z)
-                       else "not determined" if e > UNDETERMINED * max(abs(v), abs(pv))
+                       else "not determined" if rh.undetermined(v, e, pv)
                        else "agrees" if agrees(z) else f"differs ({z:.1f} sigma)")
             rows.append({"mu_s": mu, "parameter": name, "fit": v, "fit_err": e,
                          "red_chi2": fr.red_chi2 if fr is not None else math.nan,
@@ -859,8 +857,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              f"that exceeds 1; the SE of I propagated). 'agrees': within {AGREE_SIGMA:g} "
              "errors of the interval the paper's value stands for (its printed digits: 0.63 is "
              "0.625-0.635); 'not determined': the error exceeds "
-             f"{UNDETERMINED:.0%} of the value; the paper's A's are Table 1 (interpolated between "
-             "its rows where marked), the other constants are given in §4 for mu_s = 0 and "
+             f"{rh.UNDETERMINED:.0%} of the value; the paper's A's are Table 1 (interpolated "
+             "between its rows where marked), the other constants are given in §4 for mu_s = 0 and "
              "0.3 only. Constants are correlated within a law: read the curves above first.",
              "", _verdicts(rows), "", table1_markdown(rows), ""]
     lines += collapse_section(pool, n_main)
