@@ -33,7 +33,8 @@ Modules: :mod:`.laws` (:class:`LocalLaw`), :mod:`.problem` (:class:`ChannelProbl
 (:func:`solve_nonlocal`), :mod:`.given_phi` (both models with phi(x) given, e.g. a DEM
 run's), :mod:`.bands` (:func:`prediction_band`); and on them :mod:`.calibration` (the laws
 fitted to cell runs), :mod:`.constants` (the constants fitted once, saved and loaded) and
-:mod:`.channel_model` (the channel's DEM runs predicted and compared zone by zone) and
+:mod:`.channel_model` (the channel's DEM runs predicted and compared zone by zone),
+:mod:`.cooperativity` (the nonlocal amplitude read off a DEM run's bulk, bin by bin) and
 :mod:`.verdict` (the misfits with their SEs against the targets, and the answer). The
 arithmetic of the law forms lives in :mod:`granflow.analysis.laws`, shared with the fits.
 """

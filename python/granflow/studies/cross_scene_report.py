@@ -27,9 +27,11 @@ from granflow.continuum.channel_model import (
     A_WIDTH,
     I_PLUG,
     ZONES,
+    ChannelCase,
     Prediction,
     channel_cases,
     predict,
+    reference_case,
 )
 from granflow.continuum.verdict import (
     PHI_TARGET,
@@ -39,10 +41,12 @@ from granflow.continuum.verdict import (
     verdict_table,
     zone_errors,
 )
+from granflow.errors import ParameterError
 
 from ._campaign import core_seconds, md_table, pm_column
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import with_defaults
+from .cross_scene_bulk import bulk_lines
 
 MODELS = ("local", "nonlocal")
 COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}
@@ -242,6 +246,14 @@ def dem_phi_lines(pred: Prediction) -> list[str]:
 GATHERED = 0.75
 
 
+def _reference(cases: list[ChannelCase]) -> ChannelCase | None:
+    """The run the amplitude is fitted on, where the channel dataset has it."""
+    try:
+        return reference_case(cases, (A_WIDTH, A_PHI_BAR))
+    except ParameterError:
+        return None
+
+
 def _is_ref() -> pl.Expr:
     return (pl.col("W") == A_WIDTH) & (pl.col("phi_bar") == A_PHI_BAR)
 
@@ -372,14 +384,15 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     pred.residuals.write_parquet(out / "residuals.parquet")
     pred.boundary.write_parquet(out / "boundary.parquet")
     pred.dem_phi.write_parquet(out / "dem_phi.parquet")
-    verdicts = verdict_table(zone_errors(channel_cases(channel), pred.profiles))
+    cases = channel_cases(channel)
+    verdicts = verdict_table(zone_errors(cases, pred.profiles))
     verdicts.write_parquet(out / "verdict.parquet")
     figdir = path.parent / f"{path.stem}_figures"
     rel = path.parent
     figs = [plot_law(pred, figdir / "law.png")]
     phis = sorted(set(pred.cases["phi_bar"].to_list()))
     drawn: set[float] = set()
-    for case in channel_cases(channel):
+    for case in cases:
         # one figure per width (its first replica) at the reference phi_bar
         if case.phi_bar == (A_PHI_BAR if A_PHI_BAR in phis else phis[0]) and case.W not in drawn:
             drawn.add(case.W)
@@ -492,6 +505,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "past k (so the columns compare the amplitude's transfer, not the models' reach):", "",
         md_table(_boundary_table(pred.boundary), {"x0": ".2f"}), "",
         *dem_phi_lines(pred),
+        *bulk_lines(cases, pred.cal, _reference(cases), out, figdir / "bulk_amplitude.png",
+                    rel),
         "## 4. The DEM's bins against the cell's law (000's loose-zone claim)", "",
         "Each DEM bin's mu and phi against the cell's law at the bin's own I; in range: the "
         "bins whose I lies in the calibrated range (the others would test an extrapolation):",
