@@ -101,3 +101,29 @@ def test_the_trend_test_finds_an_imposed_slope_and_none_in_a_constant():
         trend(base, "seed")
     with pytest.raises(ParameterError, match=">= 3"):
         trend(base.head(2), "W")
+
+
+def test_a_wall_layer_with_the_bulks_amplitude_is_no_layer_and_a_wider_one_spreads_further():
+    case = model_case(0.45)
+    prob, t = case.problem(0), case.profile
+    xs, ph = t["xi"].to_numpy(), t["phi"].to_numpy()
+    plain = solve_nonlocal_given_phi(LAW, 0.45, prob, xs, ph)
+    same = solve_nonlocal_given_phi(LAW, 0.45, prob, xs, ph, layer=(X_BULK, 0.45))
+    np.testing.assert_array_equal(plain.u, same.u)
+    # the wall's fluidity reaches further into the channel the larger the layer's amplitude
+    g_at = [np.interp(X_BULK, p.x, p.fluidity) for p in (
+        solve_nonlocal_given_phi(LAW, 0.45, prob, xs, ph, layer=(X_BULK, a))
+        for a in (0.2, 0.45, 0.9))]
+    assert g_at[0] < g_at[1] < g_at[2]
+    with pytest.raises(ParameterError, match="A_layer"):
+        solve_nonlocal_given_phi(LAW, 0.45, prob, xs, ph, layer=(X_BULK, 0.0))
+
+
+def test_the_layer_amplitude_of_a_profile_made_with_one_is_found_and_transfers():
+    from granflow.continuum.cooperativity import fit_layer_amplitude, layer_table
+
+    # the model's own runs, made with one amplitude throughout: the layer needs that same one
+    ref, other = model_case(0.45), model_case(0.45, W=60.0)
+    assert fit_layer_amplitude(ref, LAW, 0.45) == pytest.approx(0.45, rel=0.05)
+    t = layer_table([ref, other], {1e-4: _Cal()}, 0.45, ref)  # type: ignore[dict-item]
+    assert (t["u_rel_held"] < 0.01).all() and (t["u_rel_one"] < 0.01).all()

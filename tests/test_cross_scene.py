@@ -209,6 +209,9 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
     got = bulk.filter(pl.col("A").is_not_nan())
     assert got.height >= 3 and ((got["A"] > 0) & (got["A_se"] > 0)).all()
     assert ((bulk["wall_share"] > 0) & (bulk["wall_share"] <= 1)).all()
+    layer = pl.read_parquet(out / "wall_layer.parquet")
+    assert layer.height == cases.height and (layer["A_layer_best"] > 0).all()
+    assert "### The wall layer with a law of its own" in text
 
 
 # ---------------------------------------------------------------------------------------------

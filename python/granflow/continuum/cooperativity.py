@@ -29,8 +29,10 @@ from granflow.errors import ParameterError
 
 from ._checks import FloatArray
 from .calibration import Calibration
-from .channel_model import ChannelCase, law_for, solve
+from .channel_model import ChannelCase, law_for, solve, velocity_misfit
+from .given_phi import solve_nonlocal_given_phi
 from .laws import LocalLaw
+from .problem import Profile
 
 #: distance from the wall (d) where the bulk window starts: the wall bin and the two bins
 #: beside it (000's wall zone, 2 d, and its loose bin) give amplitudes 2-6x below the
@@ -227,3 +229,43 @@ def trend(table: pl.DataFrame, against: str) -> Trend:
     slope = float(np.sum(w * vc * (a - mean)) / sxx)
     se = sxx ** -0.5
     return Trend(against, slope, se, slope / se, mean, float(np.sum(w) ** -0.5), chi2)
+
+
+def layer_profile(case: ChannelCase, law: LocalLaw, A: float, A_layer: float) -> Profile:
+    """The nonlocal model of ``case`` with the DEM's phi profile, boundary data at the wall
+    bin, amplitude ``A`` in the bulk and ``A_layer`` in the wall layer (x < :data:`X_BULK`):
+    the wall layer with a law of its own."""
+    t = case.profile
+    return solve_nonlocal_given_phi(law, A, case.problem(0), t["xi"].to_numpy(),
+                                    t["phi"].to_numpy(), layer=(X_BULK, A_layer))
+
+
+def fit_layer_amplitude(case: ChannelCase, law: LocalLaw, A: float) -> float:
+    """The wall layer's amplitude that best fits ``case``'s whole velocity profile
+    (:func:`granflow.continuum.channel_model.velocity_misfit`) with the bulk's ``A`` held
+    (bounded search in log10, 0.01-3)."""
+    from scipy.optimize import minimize_scalar
+
+    r = minimize_scalar(lambda la: velocity_misfit(case, layer_profile(case, law, A, 10**la)),
+                        bounds=(-2.0, 0.5), method="bounded", options={"xatol": 2e-3})
+    return float(10**r.x)
+
+
+def layer_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float,
+                reference: ChannelCase) -> pl.DataFrame:
+    """The wall layer with its own amplitude, the bulk's ``A`` held everywhere: per run its
+    own best layer amplitude and misfit, and the misfit with the layer amplitude fitted on
+    ``reference`` held (whole-channel velocity misfits, the DEM's phi); ``u_rel_one`` the
+    misfit with one amplitude, ``A``, in the layer too."""
+    a_ref = fit_layer_amplitude(reference, law_for(reference, cal).law, A)
+    rows = []
+    for case in cases:
+        law = law_for(case, cal).law
+        a = fit_layer_amplitude(case, law, A)
+        rows.append({
+            "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed, "A": A,
+            "A_layer_ref": a_ref, "A_layer_best": a,
+            "u_rel_one": velocity_misfit(case, layer_profile(case, law, A, A)),
+            "u_rel_best": velocity_misfit(case, layer_profile(case, law, A, a)),
+            "u_rel_held": velocity_misfit(case, layer_profile(case, law, A, a_ref))})
+    return pl.DataFrame(rows)

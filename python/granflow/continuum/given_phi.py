@@ -95,16 +95,27 @@ def solve_local_given_phi(law: LocalLaw, prob: ChannelProblem, x_phi: npt.ArrayL
 
 def solve_nonlocal_given_phi(law: LocalLaw, A: float, prob: ChannelProblem,
                              x_phi: npt.ArrayLike, phi: npt.ArrayLike,
-                             n: int = N_GRID) -> Profile:
+                             n: int = N_GRID,
+                             layer: tuple[float, float] | None = None) -> Profile:
     """The nonlocal granular fluidity model with the packing fraction ``phi`` given at
     ``x_phi`` instead of the law's phi(I): the stress from (B2) by quadrature, then the
     fluidity from ``(A d)^2 g'' = |mu - mu_s| (g - g_loc(mu))`` with ``g(x0) = g_wall`` and
     ``g'(W/2) = 0`` (second-order finite differences, the centre's condition by a mirror
-    node), and ``du/dx = mu g``. Raises ParameterError for ``A <= 0``, a missing ``g_wall``
-    or a wall stress ratio above ``law.mu_max``."""
+    node), and ``du/dx = mu g``.
+
+    ``layer = (x_layer, A_layer)``: a wall layer with an amplitude of its own, ``A_layer``
+    for ``x < x_layer`` and ``A`` beyond (g and g' continuous across ``x_layer``): the
+    fluidity law's amplitude where the DEM's bulk and wall layer differ
+    (granflow.continuum.cooperativity). Raises ParameterError for ``A <= 0`` (or
+    ``A_layer``), a missing ``g_wall`` or a wall stress ratio above ``law.mu_max``."""
     finite("A", A)
     if A <= 0:
         raise bad("A", A, "> 0")
+    if layer is not None:
+        finite("x_layer", layer[0])
+        finite("A_layer", layer[1])
+        if layer[1] <= 0:
+            raise bad("A_layer", layer[1], "> 0")
     if prob.g_wall is None:
         raise bad("g_wall", None, "> 0 (the nonlocal model needs the wall fluidity)")
     x, ph, s, mu = _given(law, prob, x_phi, phi, n)
@@ -113,19 +124,23 @@ def solve_nonlocal_given_phi(law: LocalLaw, A: float, prob: ChannelProblem,
         gl = _g_loc(law, mu, c)
     m = np.abs(mu - law.mu_s)
     h = float(x[1] - x[0])
-    k2 = (A * prob.d / h) ** 2
-    # unknowns g_1 .. g_{n-1} (g_0 = g_wall); row i: k2 (g_{i-1} - 2 g_i + g_{i+1}) - m_i g_i
-    # = -m_i gl_i; the last row has the mirror node g_n = g_{n-2} (g' = 0 at the centre)
+    amp = np.full(x.size, float(A))
+    if layer is not None:
+        amp[x < layer[0]] = layer[1]
+    k2 = (amp[1:] * prob.d / h) ** 2  # row i's (A_i d / h)^2, i = 1 .. n-1
+    # unknowns g_1 .. g_{n-1} (g_0 = g_wall); row i: k2_i (g_{i-1} - 2 g_i + g_{i+1}) -
+    # m_i g_i = -m_i gl_i; the last row has the mirror node g_n = g_{n-2} (g' = 0 at the
+    # centre)
     nu = x.size - 1
     ab = np.zeros((3, nu))
-    ab[0, 1:] = k2                  # super-diagonal
+    ab[0, 1:] = k2[:-1]             # super-diagonal (row i's g_{i+1})
     ab[1, :] = -2.0 * k2 - m[1:]    # diagonal
-    ab[2, :-1] = k2                 # sub-diagonal
-    ab[2, -2] = 2.0 * k2            # the mirror: g_{n-2} counts twice in the last row
+    ab[2, :-1] = k2[1:]             # sub-diagonal (row i+1's g_i)
+    ab[2, -2] = 2.0 * k2[-1]        # the mirror: g_{n-2} counts twice in the last row
     rhs = -m[1:] * gl[1:]
-    rhs[0] -= k2 * prob.g_wall
+    rhs[0] -= k2[0] * prob.g_wall
     g = np.empty_like(x)
     g[0] = prob.g_wall
     g[1:] = solve_banded((1, 1), ab, rhs)
-    info = {"mu_wall": float(mu[0]), "phi": "given", "nodes": int(x.size)}
+    info = {"mu_wall": float(mu[0]), "phi": "given", "nodes": int(x.size), "layer": layer}
     return _profile("nonlocal", float(A), prob, x, ph, s, mu * g, g, info)

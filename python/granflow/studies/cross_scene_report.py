@@ -46,7 +46,7 @@ from granflow.errors import ParameterError
 from ._campaign import core_seconds, md_table, pm_column
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import with_defaults
-from .cross_scene_bulk import bulk_lines
+from .cross_scene_report_bulk import bulk_lines
 
 MODELS = ("local", "nonlocal")
 COLOURS = {"local": "tab:blue", "nonlocal": "tab:red"}
