@@ -330,3 +330,19 @@ def test_the_dem_phi_variant_carries_the_runs_own_stress(constants):
         cm.solve("nonlocal", law, case, 0.5, phi="cell")
     pred = cm.predict_channel(constants, case, n_band=0, phi="dem")
     assert pred.cases["phi"][0] == "dem" and pred.cases["nonlocal_u_rel"].is_finite().all()
+
+
+def test_the_bins_phi_slope_takes_its_se_from_bins_whose_stencils_do_not_overlap():
+    from granflow.studies.cross_scene_report_bulk import _local_phi_slope
+
+    phi = np.linspace(0.6, 0.64, 12)
+    bins = pl.DataFrame({"W": [40.0] * 12, "phi_bar": [0.6] * 12, "seed": [1] * 12,
+                         "phi": phi, "bulk": [True] * 12})
+    slope, se = _local_phi_slope(bins.with_columns(pl.Series("A", 0.4 + 2.0 * (phi - 0.62))))
+    assert slope == pytest.approx(2.0) and se < 1e-6
+    # every third bin carries an offset of its own: pooled, the residuals look small beside
+    # the disagreement of the three sets' slopes, which the SE must then carry
+    tilt = np.array([3.0, 0.0, -3.0] * 4) * (phi - 0.62)
+    _, se_tilted = _local_phi_slope(bins.with_columns(
+        pl.Series("A", 0.4 + 2.0 * (phi - 0.62) + tilt)))
+    assert se_tilted >= np.std([5.0, 2.0, -1.0], ddof=1) / np.sqrt(3) * 0.99
