@@ -303,8 +303,10 @@ def findings(pred: Prediction) -> list[str]:
             + f"; by phi_bar, at W = {A_WIDTH:g}: " + ", ".join(
                 f"A = {r['A_best']:.2f} (phi_bar = {r['phi_bar']:g})"
                 for r in c.filter(pl.col("W") == A_WIDTH).iter_rows(named=True))
-            + ". The cooperativity length the channel needs is not one material constant "
-            "with this local law and these boundary data.")
+            + ". Fitted to whole profiles, the cooperativity length the channel needs is "
+            "not one material constant with this local law and these boundary data; read "
+            "off the bulk alone, the amplitude varies far less (section 'The amplitude "
+            "measured in the bulk'): the spread comes from the wall layer.")
     out.append(
         "* **The boundary layer is too wide**: the nonlocal delta_0.95 is "
         + ", ".join(f"{r['nonlocal_delta_095'] - r['dem_delta_095']:+.2f}"
