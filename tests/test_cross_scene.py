@@ -212,6 +212,12 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
     layer = pl.read_parquet(out / "wall_layer.parquet")
     assert layer.height == cases.height and (layer["A_layer_best"] > 0).all()
     assert "### The wall layer with a law of its own" in text
+    # the layer's local laws, fitted at the reference width, held for the others
+    laws = pl.read_parquet(out / "layer_laws.parquet")
+    assert laws.height == 4 and (laws["n"] > 0).all()
+    layered = pl.read_parquet(out / "layered.parquet")
+    assert layered.height == cases.height and layered["u_rel"].is_finite().all()
+    assert "### The wall layer as local laws per distance" in text
 
 
 # ---------------------------------------------------------------------------------------------

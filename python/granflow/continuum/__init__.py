@@ -34,8 +34,9 @@ Modules: :mod:`.laws` (:class:`LocalLaw`), :mod:`.problem` (:class:`ChannelProbl
 run's), :mod:`.bands` (:func:`prediction_band`); and on them :mod:`.calibration` (the laws
 fitted to cell runs), :mod:`.constants` (the constants fitted once, saved and loaded) and
 :mod:`.channel_model` (the channel's DEM runs predicted and compared zone by zone),
-:mod:`.cooperativity` (the nonlocal amplitude read off a DEM run's bulk, bin by bin) and
-:mod:`.verdict` (the misfits with their SEs against the targets, and the answer). The
+:mod:`.cooperativity` (the nonlocal amplitude read off a DEM run's bulk, bin by bin),
+:mod:`.wall_layer` (the wall layer's local laws per distance, with the bulk's model beyond)
+and :mod:`.verdict` (the misfits with their SEs against the targets, and the answer). The
 arithmetic of the law forms lives in :mod:`granflow.analysis.laws`, shared with the fits.
 """
 
