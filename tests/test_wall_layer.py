@@ -74,3 +74,14 @@ def test_one_run_or_runs_binned_otherwise_are_refused():
         fit_layer_laws([made_case(30.0), shifted])
     with pytest.raises(ParameterError, match="not the laws'"):
         predict_layered(shifted, LAWS, LAW, 0.45)
+
+
+def test_the_example_fits_the_committed_runs_and_predicts_the_widths_run():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).parent.parent
+    out = subprocess.run([sys.executable, "examples/wall_layer_transfer.py"], cwd=root,
+                         capture_output=True, text=True, timeout=300, check=True).stdout
+    assert "laws fitted on 3 runs at W = 40" in out and "u_rel" in out
