@@ -18,7 +18,12 @@ from matplotlib.figure import Figure
 
 from granflow.analysis.plots import save_figure
 from granflow.continuum.calibration import Calibration
-from granflow.continuum.channel_model import A_WIDTH, ChannelCase, law_for
+from granflow.continuum.channel_model import (
+    A_WIDTH,
+    ChannelCase,
+    law_for,
+    local_law_residuals,
+)
 from granflow.continuum.cooperativity import (
     G_FLOOR,
     X_BULK,
@@ -27,7 +32,7 @@ from granflow.continuum.cooperativity import (
     layer_table,
     trend,
 )
-from granflow.continuum.verdict import U_TARGET, WIDE
+from granflow.continuum.verdict import PHI_TARGET, U_TARGET, WIDE
 from granflow.continuum.wall_layer import fit_layer_laws, layered_table
 
 from ._campaign import md_table
@@ -219,6 +224,21 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
     return lines
 
 
+def _dense_phi(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]) -> str:
+    """How far the dense zone's phi lies from the cell's phi(I) at the bins' own I (the
+    bins in the calibrated range): what the phi half of the target faces in the bulk."""
+    res = pl.concat([local_law_residuals(c, law_for(c, cal).law) for c in cases]).filter(
+        (pl.col("zone") == "dense") & pl.col("in_range"))
+    if res.height < 2:
+        return "too few dense bins in the calibrated range to say how far the cell's phi is"
+    d = res["d_phi"].to_numpy()
+    return (f"in the dense zone the DEM's phi lies {np.mean(d):+.3f} (SD {np.std(d, ddof=1):.3f},"
+            f" {d.size} bins) from the cell's phi(I) at the same I (section 4): "
+            + (f"the cell's phi(I) misses the {PHI_TARGET:g} target there whatever the flow "
+               "rule" if abs(float(np.mean(d))) > PHI_TARGET else
+               f"within the {PHI_TARGET:g} target"))
+
+
 def _by_fit_width(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float
                   ) -> pl.DataFrame:
     """Per width with >= 2 runs: the laws fitted there (the wall stress ratios of the runs
@@ -287,7 +307,8 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
         "are steep powers of mu); the wider the range they are fitted over, the better they "
         "carry. "
         "Not tested here: phi "
-        "(the runs' own phi profiles give the stress; the layer's packing needs a law too), "
+        "(the runs' own phi profiles give the stress; the layer's packing needs a law too; "
+        + _dense_phi(cases, cal) + "), "
         "u_slip and sigma_xx (taken from each run), and whether the laws hold at W >= 100 "
         "and with replicas (the widths campaign).", ""]
 
