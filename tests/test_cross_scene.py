@@ -218,6 +218,7 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
     layered = pl.read_parquet(out / "layered.parquet")
     assert layered.height == cases.height and layered["u_rel"].is_finite().all()
     assert "### The wall layer as local laws per distance" in text
+    assert "| W | zone | runs | u - u_slip misfit (worst run) | u |" in text  # its verdicts
 
 
 # ---------------------------------------------------------------------------------------------

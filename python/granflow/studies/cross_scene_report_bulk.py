@@ -32,10 +32,21 @@ from granflow.continuum.cooperativity import (
     layer_table,
     trend,
 )
-from granflow.continuum.verdict import PHI_TARGET, U_TARGET, WIDE
-from granflow.continuum.wall_layer import fit_layer_laws, layered_table
+from granflow.continuum.verdict import (
+    PHI_TARGET,
+    U_TARGET,
+    WIDE,
+    verdict_table,
+    zone_errors,
+)
+from granflow.continuum.wall_layer import (
+    LayerLaws,
+    fit_layer_laws,
+    layered_table,
+    predict_layered,
+)
 
-from ._campaign import md_table
+from ._campaign import md_table, pm_column
 
 #: |z| above which a trend counts as measured (2 SE)
 Z_TREND = 2.0
@@ -239,6 +250,22 @@ def _dense_phi(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]) -
                f"within the {PHI_TARGET:g} target"))
 
 
+def _zone_verdicts(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
+                   laws: LayerLaws, A: float) -> pl.DataFrame:
+    """The layered model's verdict rows (granflow.continuum.verdict) for u - u_slip; its phi
+    is the runs' own, so it has no phi verdict."""
+    profs = []
+    for c in cases:
+        u = predict_layered(c, laws, law_for(c, cal).law, A)
+        profs.append(pl.DataFrame({"W": c.W, "phi_bar": c.phi_bar, "seed": c.seed,
+                                   "model": "layered", "xi": c.profile["xi"].to_numpy(),
+                                   "du": u - u[0], "phi": math.nan}))
+    table = verdict_table(zone_errors(cases, pl.concat(profs)))
+    return table.select("W", "zone", "runs",
+                        pm_column("u_rel", "u_rel_se", "u - u_slip misfit (worst run)", 3),
+                        "u")
+
+
 def _by_fit_width(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float
                   ) -> pl.DataFrame:
     """Per width with >= 2 runs: the laws fitted there (the wall stress ratios of the runs
@@ -306,6 +333,10 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
         "Laws fitted over a narrow range of wall stress ratios extrapolate poorly (they "
         "are steep powers of mu); the wider the range they are fitted over, the better they "
         "carry. "
+        "Per width and zone, the worst run's misfit of u - u_slip with its SE (the DEM "
+        "bins' SEs; the laws' own uncertainty is not propagated) and the verdict as in "
+        f"section 5 (W = {A_WIDTH:g}: the runs the laws were fitted on):", "",
+        md_table(_zone_verdicts(cases, cal, laws, A), {"W": "g"}), "",
         "Not tested here: phi "
         "(the runs' own phi profiles give the stress; the layer's packing needs a law too; "
         + _dense_phi(cases, cal) + "), "
