@@ -37,7 +37,7 @@ def made_case(sigma_xx: float, W: float = 40.0) -> ChannelCase:
                          "mu": np.full(n, 0.2), "phi": np.full(n, 0.6),
                          "zone": ["wall"] * 2 + ["dense"] * (n - 2)})
     case = ChannelCase(W, 0.6, 1e5, base.with_columns(pl.col("u") + 3.0), sigma_xx, 3.0, 1)
-    u = predict_layered(case, LAWS, LAW, 0.45)
+    u = predict_layered(case, LAWS, LAW, 0.45).u
     mu_b = 0.6 * (W / 2 - 4.0) / sigma_xx  # (B2) with phi = 0.6
     gd = base["gamma_dot"].to_numpy().copy()
     gd[3] = math.sqrt(sigma_xx) * LAWS.c[3] * mu_b ** LAWS.n[3]
@@ -51,7 +51,12 @@ def test_the_laws_are_fitted_back_from_the_profiles_they_made_and_predict_anothe
     assert fitted.x == XI
     np.testing.assert_allclose(fitted.c, LAWS.c, rtol=1e-6)
     np.testing.assert_allclose(fitted.n, LAWS.n, rtol=1e-6)
+    # the runs pack at 0.6 everywhere: the layer's packing laws are flat at 0.6, and the
+    # prediction's phi is 0.6 in the layer and the law's phi(I) (0.6) beyond
+    np.testing.assert_allclose(fitted.phi_a, 0.6, atol=1e-9)
+    np.testing.assert_allclose(fitted.phi_b, 0.0, atol=1e-9)
     other = made_case(45.0, W=60.0)
+    np.testing.assert_allclose(predict_layered(other, fitted, LAW, 0.45).phi, 0.6, atol=1e-9)
     t = layered_table([other], {1e-4: _Cal()}, fitted, 0.45)  # type: ignore[dict-item]
     assert t["u_rel"][0] < 1e-6 and t["du_ratio"][0] == pytest.approx(1.0, abs=1e-6)
 
@@ -59,7 +64,7 @@ def test_the_laws_are_fitted_back_from_the_profiles_they_made_and_predict_anothe
 def test_a_steeper_law_shears_the_layer_more():
     case = made_case(32.0)
     steep = LayerLaws(XI, tuple(2 * c for c in LAWS.c), LAWS.n, "steeper")
-    u0, u1 = (predict_layered(case, laws, LAW, 0.45) for laws in (LAWS, steep))
+    u0, u1 = (predict_layered(case, laws, LAW, 0.45).u for laws in (LAWS, steep))
     assert np.all(np.diff(u1[:4]) > np.diff(u0[:4]))
 
 

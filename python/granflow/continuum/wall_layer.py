@@ -45,12 +45,30 @@ class LayerLaws:
     c: tuple[float, ...]
     n: tuple[float, ...]
     runs: str
+    #: the layer bins' packing, phi = phi_a[k] + phi_b[k] mu at bin centre x[k] (k < K)
+    phi_a: tuple[float, ...] = ()
+    phi_b: tuple[float, ...] = ()
 
     def table(self) -> pl.DataFrame:
-        """One row per law: where it applies, c and n."""
+        """One row per law: where it applies, c and n (and the packing law at the interval's
+        wall-side bin centre, where there is one)."""
         k = len(self.x) - 1
         where = [f"{self.x[i]:g}-{self.x[i + 1]:g} d" for i in range(k)] + [f"{self.x[-1]:g} d"]
-        return pl.DataFrame({"x": where, "c": list(self.c), "n": list(self.n)})
+        out = pl.DataFrame({"x": where, "c": list(self.c), "n": list(self.n)})
+        if len(self.phi_a) == k:
+            nan = [math.nan]
+            out = out.with_columns(pl.Series("phi_a", [*self.phi_a, *nan]),
+                                   pl.Series("phi_b", [*self.phi_b, *nan]))
+        return out
+
+
+@dataclass(frozen=True)
+class LayeredPrediction:
+    """The layered model at a run's bins: u, and phi (the layer's packing laws in the layer,
+    the cell's phi(I) at the model's I beyond; the stress is the run's either way)."""
+
+    u: FloatArray
+    phi: FloatArray
 
 
 def _layer_bins(case: ChannelCase) -> int:
@@ -106,16 +124,21 @@ def fit_layer_laws(cases: Sequence[ChannelCase]) -> LayerLaws:
         raise ParameterError("invalid cases: a wall-layer shear rate or stress ratio is not "
                              "positive (a run that does not shear at its wall)")
     fits = [np.polyfit(np.log(mu[:, k]), np.log(i[:, k]), 1) for k in range(K + 1)]
+    mu_c = np.array([_mu_at(c, x0[:K]) for c in cases])
+    phi_c = np.array([c.profile["phi"].to_numpy()[:K] for c in cases])
+    packing = [np.polyfit(mu_c[:, k], phi_c[:, k], 1) for k in range(K)]
     return LayerLaws(tuple(float(v) for v in x0), tuple(float(math.exp(f[1])) for f in fits),
-                     tuple(float(f[0]) for f in fits), "; ".join(c.name for c in cases))
+                     tuple(float(f[0]) for f in fits), "; ".join(c.name for c in cases),
+                     tuple(float(f[1]) for f in packing), tuple(float(f[0]) for f in packing))
 
 
 def predict_layered(case: ChannelCase, laws: LayerLaws, law: LocalLaw, A: float
-                    ) -> FloatArray:
-    """u at ``case``'s bins: u_slip from the run, the layer's velocity from ``laws``, the
-    bulk from the nonlocal model (``law``, amplitude ``A``, the run's phi) with boundary data
-    at the first bulk bin from the layer (its velocity, and its fluidity from the last
-    law)."""
+                    ) -> LayeredPrediction:
+    """u and phi at ``case``'s bins: u_slip from the run, the layer's velocity (and, with
+    packing laws, its phi) from ``laws``, the bulk from the nonlocal model (``law``,
+    amplitude ``A``, the run's phi for the stress) with boundary data at the first bulk bin
+    from the layer (its velocity, and its fluidity from the last law); the bulk's phi the
+    cell's phi(I) at the model's I (NaN in the layer without packing laws)."""
     K = _layer_bins(case)
     t = case.profile
     x = t["xi"].to_numpy()
@@ -132,7 +155,11 @@ def predict_layered(case: ChannelCase, laws: LayerLaws, law: LocalLaw, A: float
     prob = ChannelProblem(W=case.W, sigma_xx=case.sigma_xx, u_wall=float(u[-1]), x0=float(x[K]),
                           g_wall=g_b)
     bulk = solve_nonlocal_given_phi(law, A, prob, x, t["phi"].to_numpy())
-    return np.concatenate([u[:-1], bulk.at(x[K:])["u"]])
+    at = bulk.at(x[K:])
+    phi_layer = (np.asarray(laws.phi_a) + np.asarray(laws.phi_b) * _mu_at(case, x[:K])
+                 if len(laws.phi_a) == K else np.full(K, math.nan))
+    return LayeredPrediction(np.concatenate([u[:-1], at["u"]]),
+                             np.concatenate([phi_layer, law.phi(at["I"])]))
 
 
 def layered_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
@@ -144,7 +171,7 @@ def layered_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
     for case in cases:
         t = case.profile
         u = t["u"].to_numpy()
-        um = predict_layered(case, laws, law_for(case, cal).law, A)
+        um = predict_layered(case, laws, law_for(case, cal).law, A).u
         r = (um - u)[1:] / (u[-1] - u[0])
         K = _layer_bins(case)
         rows.append({"W": case.W, "phi_bar": case.phi_bar, "seed": case.seed,

@@ -36,6 +36,7 @@ from granflow.continuum.verdict import (
     PHI_TARGET,
     U_TARGET,
     WIDE,
+    answer,
     verdict_table,
     zone_errors,
 )
@@ -252,18 +253,15 @@ def _dense_phi(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]) -
 
 def _zone_verdicts(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
                    laws: LayerLaws, A: float) -> pl.DataFrame:
-    """The layered model's verdict rows (granflow.continuum.verdict) for u - u_slip; its phi
-    is the runs' own, so it has no phi verdict."""
+    """The layered model's verdict rows (granflow.continuum.verdict): u - u_slip, and phi
+    (the layer's packing laws, the cell's phi(I) beyond; no verdict in the plug)."""
     profs = []
     for c in cases:
-        u = predict_layered(c, laws, law_for(c, cal).law, A)
+        pred = predict_layered(c, laws, law_for(c, cal).law, A)
         profs.append(pl.DataFrame({"W": c.W, "phi_bar": c.phi_bar, "seed": c.seed,
                                    "model": "layered", "xi": c.profile["xi"].to_numpy(),
-                                   "du": u - u[0], "phi": math.nan}))
-    table = verdict_table(zone_errors(cases, pl.concat(profs)))
-    return table.select("W", "zone", "runs",
-                        pm_column("u_rel", "u_rel_se", "u - u_slip misfit (worst run)", 3),
-                        "u")
+                                   "du": pred.u - pred.u[0], "phi": pred.phi}))
+    return verdict_table(zone_errors(cases, pl.concat(profs)))
 
 
 def _by_fit_width(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float
@@ -305,6 +303,7 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
                        pl.col("u_rel_layer").alias("in the layer"),
                        pl.col("u_rel_bulk").alias("in the bulk"),
                        pl.col("du_ratio").alias("u_max - u_slip, model/DEM"))
+    verdicts = _zone_verdicts(cases, cal, laws, A)
     wide = tab.filter(pl.col("W") >= WIDE)
     worst = wide["u_rel"].to_numpy()
     n_in = int(np.sum(worst < U_TARGET))
@@ -333,12 +332,19 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
         "Laws fitted over a narrow range of wall stress ratios extrapolate poorly (they "
         "are steep powers of mu); the wider the range they are fitted over, the better they "
         "carry. "
-        "Per width and zone, the worst run's misfit of u - u_slip with its SE (the DEM "
-        "bins' SEs; the laws' own uncertainty is not propagated) and the verdict as in "
-        f"section 5 (W = {A_WIDTH:g}: the runs the laws were fitted on):", "",
-        md_table(_zone_verdicts(cases, cal, laws, A), {"W": "g"}), "",
-        "Not tested here: phi "
-        "(the runs' own phi profiles give the stress; the layer's packing needs a law too; "
+        "The layer's packing, fitted alike at its bin centres (phi = a + b mu), and the "
+        "cell's phi(I) at the model's I beyond it give the model's phi. Per width and zone, "
+        "the worst run's misfits with their SEs (the DEM bins' SEs; the laws' own "
+        "uncertainty is not propagated) and the verdicts as in section 5 (W = "
+        f"{A_WIDTH:g}: the runs the laws were fitted on):", "",
+        md_table(verdicts.select(
+            "W", "zone", "runs",
+            pm_column("u_rel", "u_rel_se", "u - u_slip misfit (worst run)", 3), "u",
+            pm_column("phi_abs", "phi_abs_se", "phi misfit (worst run)"), "phi"),
+            {"W": "g"}), "",
+        f"**With the wall layer's laws: {answer(verdicts)}**", "",
+        "Not tested here: phi in the stress (the runs' own phi profiles give it; the "
+        "packing laws and the cell's phi(I) predict phi for the verdicts only; "
         + _dense_phi(cases, cal) + "), "
         "u_slip and sigma_xx (taken from each run), and whether the laws hold at W >= 100 "
         "and with replicas (the widths campaign).", ""]
