@@ -232,7 +232,7 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
     if reference is not None:
         a_bulk = float(table.filter(pl.col("A_ref").is_not_nan())["A_ref"][0])
         lines += layer_lines(layer_table(cases, cal, a_bulk, reference), out)
-        lines += layered_lines(cases, cal, a_bulk, out)
+        lines += layered_lines(cases, cal, a_bulk, out, fig_path.parent, rel)
     return lines
 
 
@@ -284,8 +284,39 @@ def _by_fit_width(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
     return pl.DataFrame(rows)
 
 
+def plot_layered(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
+                 laws: LayerLaws, A: float, path: Path) -> Path:
+    """u - u_slip and phi across the half channel of the wide runs (W >= WIDE, or all where
+    there are none): the DEM with 2 SE bars against the layered model."""
+    wide = [c for c in cases if c.W >= WIDE] or list(cases)
+    fig = Figure(figsize=(12, 4.5))
+    ax, bx = fig.subplots(1, 2)
+    colours = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+    for c, colour in zip(wide, colours, strict=False):
+        t = c.profile
+        x, u = t["xi"].to_numpy(), t["u"].to_numpy()
+        pred = predict_layered(c, laws, law_for(c, cal).law, A)
+        name = c.name
+        ax.errorbar(x, u - u[0], yerr=2 * t["u_se"].to_numpy(), fmt="o", ms=3, capsize=2,
+                    color=colour, label=f"DEM, {name}")
+        ax.plot(x, pred.u - pred.u[0], "-", color=colour, label=f"layered model, {name}")
+        bx.errorbar(x, t["phi"].to_numpy(), yerr=2 * t["phi_se"].to_numpy(), fmt="o", ms=3,
+                    capsize=2, color=colour, label=f"DEM, {name}")
+        bx.plot(x, pred.phi, "-", color=colour, label=f"layered model, {name}")
+    for a in (ax, bx):
+        a.axvspan(0, X_BULK, color="0.9", label=f"wall layer (x < {X_BULK:g} d)"
+                  if a is ax else None)
+        a.set_xlabel("distance from the wall x  [d]")
+    ax.set_ylabel("u - u_slip  [sqrt(g d)]")
+    bx.set_ylabel("phi")
+    ax.legend(fontsize=6)
+    fig.suptitle(f"the wall layer's laws (fitted at W = {A_WIDTH:g}) and the bulk's "
+                 f"nonlocal model (A = {A:.3f}) against the DEM")
+    return save_figure(fig, path)
+
+
 def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float,
-                  out: Path) -> list[str]:
+                  out: Path, fig_dir: Path, rel: Path) -> list[str]:
     """The wall layer as local laws per distance (granflow.continuum.wall_layer), fitted on
     the runs at the reference width and held for the others (``out/layer_laws.parquet``,
     ``out/layered.parquet``)."""
@@ -304,6 +335,7 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
                        pl.col("u_rel_bulk").alias("in the bulk"),
                        pl.col("du_ratio").alias("u_max - u_slip, model/DEM"))
     verdicts = _zone_verdicts(cases, cal, laws, A)
+    fig = plot_layered(cases, cal, laws, A, fig_dir / "layered.png")
     wide = tab.filter(pl.col("W") >= WIDE)
     worst = wide["u_rel"].to_numpy()
     n_in = int(np.sum(worst < U_TARGET))
@@ -343,6 +375,7 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
             pm_column("phi_abs", "phi_abs_se", "phi misfit (worst run)"), "phi"),
             {"W": "g"}), "",
         f"**With the wall layer's laws: {answer(verdicts)}**", "",
+        f"![layered model]({fig.relative_to(rel)})", "",
         "Not tested here: phi in the stress (the runs' own phi profiles give it; the "
         "packing laws and the cell's phi(I) predict phi for the verdicts only; "
         + _dense_phi(cases, cal) + "), "
