@@ -202,7 +202,7 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
     for key in ("Nonlocal amplitude: A =", "Misfit per zone", "core-hours", "## Time"):
         assert key in text, key
     figs = sorted((out / "cross_scene_figures").glob("*.png"))
-    assert len(figs) == 5 and all(f"cross_scene_figures/{f.name}" in text for f in figs)
+    assert len(figs) == 6 and all(f"cross_scene_figures/{f.name}" in text for f in figs)
     # the amplitude read off each run's bulk, with its SE, beside the whole-profile fits
     bulk = pl.read_parquet(out / "bulk_amplitude.parquet")
     assert bulk.height == cases.height and "## The amplitude measured in the bulk" in text
