@@ -141,7 +141,7 @@ def bulk_amplitude(case: ChannelCase, law: LocalLaw, seed: int = 0) -> BulkAmpli
         if kd > 0 and math.isfinite(kd):
             draws.append(kd ** -0.5)
     se_draws = float(np.std(draws, ddof=1)) if len(draws) > 2 else math.nan
-    se = max(se_draws, 0.5 * a * se_k / k)
+    se = float(np.fmax(se_draws, 0.5 * a * se_k / k))  # (fmax: a NaN draw SE is absent)
     mu_s_free = math.nan
     if n >= 4:
         slope, icpt = np.polyfit(mu, r, 1)

@@ -8,7 +8,8 @@ layer's shear rate is a function of the local stress ratio alone across widths a
 fillings: between bin centres x_k and x_(k+1),
 ``(u_(k+1) - u_k) / (x_(k+1) - x_k) = sqrt(sigma_xx/rho_p)/d * c_k mu^n_k`` with mu the
 stress ratio at the interval's midpoint, and at the first bulk bin ``|du/dx| = sqrt(...)/d
-c_K mu^n_K``, which gives the bulk's boundary fluidity. The stress comes from the run's phi
+c_K mu^n_K``, which gives the bulk's boundary fluidity; the layer's bins pack as
+``phi_k = a_k + b_k mu`` (mu at the bin centre). The stress comes from the run's phi
 profile through (B2) (as granflow.continuum.given_phi), the wall velocity u_slip is the
 run's (the boundary datum every model here takes), and the bulk is the nonlocal model with
 its phi given and its amplitude held.
