@@ -207,13 +207,16 @@ def solve(model: str, law: LocalLaw, case: ChannelCase, A: float, phi: str = "mo
     return solve_local(law, prob) if model == "local" else solve_nonlocal(law, A, prob)
 
 
-def velocity_misfit(case: ChannelCase, prof: Profile, k: int = 0) -> float:
+def velocity_misfit(case: ChannelCase, prof: Profile, k: int = 0,
+                    rise_past_k: bool = False) -> float:
     """The whole-channel misfit of a model profile: the RMS of (u_model - u_DEM)/(u_max -
-    u_slip) over the DEM's bins past bin ``k`` (the boundary data's)."""
+    u_slip) over the DEM's bins past bin ``k`` (the boundary data's); ``rise_past_k``:
+    relative to the DEM's rise past bin ``k``, u_max - u(x_k), instead."""
     t = case.profile
     xi, u = t["xi"].to_numpy(), t["u"].to_numpy()
     um = prof.at(xi[k + 1:])["u"]
-    return float(np.sqrt(np.mean(((um - u[k + 1:]) / (u[-1] - u[0])) ** 2)))
+    span = u[-1] - (u[k] if rise_past_k else u[0])
+    return float(np.sqrt(np.mean(((um - u[k + 1:]) / span) ** 2)))
 
 
 def fit_amplitude(law: LocalLaw, case: ChannelCase, k: int = 0, phi: str = "model") -> float:

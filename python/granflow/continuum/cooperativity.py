@@ -152,15 +152,6 @@ def bulk_amplitude(case: ChannelCase, law: LocalLaw, seed: int = 0) -> BulkAmpli
                          float(mu.min()), float(mu.max()), mu_s_free)
 
 
-def _rise_misfit(case: ChannelCase, law: LocalLaw, A: float, k: int) -> float:
-    """RMS of (u_model - u_DEM) over the bins past bin ``k`` relative to the DEM's rise past
-    it, u_max - u(x_k): the nonlocal model (its phi(I)) with boundary data at bin ``k``."""
-    t = case.profile
-    xi, u = t["xi"].to_numpy(), t["u"].to_numpy()
-    um = solve("nonlocal", law, case, A, "model", k).at(xi[k + 1:])["u"]
-    return float(np.sqrt(np.mean(((um - u[k + 1:]) / (u[-1] - u[k])) ** 2)))
-
-
 def bulk_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
                reference: ChannelCase | None = None) -> pl.DataFrame:
     """Per run: its bulk amplitude (:func:`bulk_amplitude`), the share of its velocity rise
@@ -168,8 +159,8 @@ def bulk_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
     ``reference``, the transfer test: the reference run's bulk A held, the nonlocal model
     with its boundary data at the first bulk bin, misfit relative to the rise past it
     (``u_rel_bulk``). Runs without a bulk window get NaN and their reason."""
-    a_ref = (bulk_amplitude(reference, law_for(reference, cal).law).A
-             if reference is not None else math.nan)
+    ref = bulk_amplitude(reference, law_for(reference, cal).law) if reference else None
+    a_ref = ref.A if ref is not None else math.nan
     rows = []
     for case in cases:
         law = law_for(case, cal).law
@@ -182,13 +173,15 @@ def bulk_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
                **dict.fromkeys(("A", "A_se", "x_lo", "x_hi", "mu_lo", "mu_hi", "mu_s_free"),
                                math.nan), "n_bins": 0}
         try:
-            b = bulk_amplitude(case, law)
+            b = ref if ref is not None and case is reference else bulk_amplitude(case, law)
             row.update({"A": b.A, "A_se": b.se, "n_bins": b.n, "x_lo": b.x_lo, "x_hi": b.x_hi,
                         "mu_lo": b.mu_lo, "mu_hi": b.mu_hi, "mu_s_free": b.mu_s_free})
         except ParameterError as e:
             row["why"] = str(e)
-        row["u_rel_bulk"] = (_rise_misfit(case, law, a_ref, k)
-                             if math.isfinite(a_ref) and k < xi.size - 1 else math.nan)
+        row["u_rel_bulk"] = (
+            velocity_misfit(case, solve("nonlocal", law, case, a_ref, "model", k), k,
+                            rise_past_k=True)
+            if math.isfinite(a_ref) and k < xi.size - 1 else math.nan)
         rows.append(row)
     return pl.DataFrame(rows, schema_overrides={"A": pl.Float64, "u_rel_bulk": pl.Float64})
 
@@ -219,16 +212,15 @@ def trend(table: pl.DataFrame, against: str) -> Trend:
                              ">= 3 for a trend")
     a, s, v = (t[c].to_numpy().astype(np.float64) for c in ("A", "A_se", against))
     w = 1.0 / s**2
-    mean = float(np.sum(w * a) / np.sum(w))
+    mean, mean_se = float(np.sum(w * a) / np.sum(w)), float(np.sum(w) ** -0.5)
     chi2 = float(np.sum(w * (a - mean) ** 2)) / (a.size - 1)
     vc = v - np.sum(w * v) / np.sum(w)
     sxx = float(np.sum(w * vc * vc))
     if sxx <= 0:
-        return Trend(against, math.nan, math.nan, math.nan, mean, float(np.sum(w) ** -0.5),
-                     chi2)
+        return Trend(against, math.nan, math.nan, math.nan, mean, mean_se, chi2)
     slope = float(np.sum(w * vc * (a - mean)) / sxx)
     se = sxx ** -0.5
-    return Trend(against, slope, se, slope / se, mean, float(np.sum(w) ** -0.5), chi2)
+    return Trend(against, slope, se, slope / se, mean, mean_se, chi2)
 
 
 def layer_profile(case: ChannelCase, law: LocalLaw, A: float, A_layer: float) -> Profile:
@@ -261,7 +253,7 @@ def layer_table(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], 
     rows = []
     for case in cases:
         law = law_for(case, cal).law
-        a = fit_layer_amplitude(case, law, A)
+        a = a_ref if case is reference else fit_layer_amplitude(case, law, A)
         rows.append({
             "W": case.W, "phi_bar": case.phi_bar, "seed": case.seed, "A": A,
             "A_layer_ref": a_ref, "A_layer_best": a,

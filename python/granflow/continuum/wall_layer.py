@@ -97,8 +97,8 @@ def _observed(case: ChannelCase, K: int) -> tuple[FloatArray, FloatArray]:
     t = case.profile
     x, u = t["xi"].to_numpy(), t["u"].to_numpy()
     c = math.sqrt(case.sigma_xx)
-    mid = 0.5 * (x[:K] + x[1:K + 1])
-    mu = np.concatenate([_mu_at(case, mid), _mu_at(case, x[K:K + 1])])
+    # the intervals' midpoints, then the first bulk bin
+    mu = _mu_at(case, np.append(0.5 * (x[:K] + x[1:K + 1]), x[K]))
     rate = np.concatenate([np.diff(u[:K + 1]) / np.diff(x[:K + 1]),
                            [abs(float(t["gamma_dot"][K]))]])
     return mu, rate / c
@@ -147,17 +147,17 @@ def predict_layered(case: ChannelCase, laws: LayerLaws, law: LocalLaw, A: float
         raise ParameterError(f"invalid case {case.name}: its wall layer's bins "
                              f"{x[:K + 1]} are not the laws' {laws.x}")
     c = math.sqrt(case.sigma_xx)
-    mid = 0.5 * (x[:K] + x[1:K + 1])
-    mu = _mu_at(case, mid)
+    # the stress ratio at the intervals' midpoints, the first bulk bin and the layer's bins
+    mu_all = _mu_at(case, np.concatenate([0.5 * (x[:K] + x[1:K + 1]), x[:K + 1]]))
+    mu, mu_b, mu_bins = mu_all[:K], float(mu_all[2 * K]), mu_all[K:2 * K]
     rate = c * np.asarray(laws.c[:K]) * mu ** np.asarray(laws.n[:K])
     u = float(t["u"][0]) + np.concatenate([[0.0], np.cumsum(rate * np.diff(x[:K + 1]))])
-    mu_b = float(_mu_at(case, x[K:K + 1])[0])
     g_b = c * laws.c[K] * mu_b ** laws.n[K] / mu_b
     prob = ChannelProblem(W=case.W, sigma_xx=case.sigma_xx, u_wall=float(u[-1]), x0=float(x[K]),
                           g_wall=g_b)
     bulk = solve_nonlocal_given_phi(law, A, prob, x, t["phi"].to_numpy())
     at = bulk.at(x[K:])
-    phi_layer = (np.asarray(laws.phi_a) + np.asarray(laws.phi_b) * _mu_at(case, x[:K])
+    phi_layer = (np.asarray(laws.phi_a) + np.asarray(laws.phi_b) * mu_bins
                  if len(laws.phi_a) == K else np.full(K, math.nan))
     return LayeredPrediction(np.concatenate([u[:-1], at["u"]]),
                              np.concatenate([phi_layer, law.phi(at["I"])]))

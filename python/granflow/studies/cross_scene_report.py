@@ -507,8 +507,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "past k (so the columns compare the amplitude's transfer, not the models' reach):", "",
         md_table(_boundary_table(pred.boundary), {"x0": ".2f"}), "",
         *dem_phi_lines(pred),
-        *bulk_lines(cases, pred.cal, _reference(cases), out, figdir / "bulk_amplitude.png",
-                    rel),
+        *bulk_lines(cases, pred.cal, _reference(cases), pred.residuals, out,
+                    figdir / "bulk_amplitude.png", rel),
         "## 4. The DEM's bins against the cell's law (000's loose-zone claim)", "",
         "Each DEM bin's mu and phi against the cell's law at the bin's own I; in range: the "
         "bins whose I lies in the calibrated range (the others would test an extrapolation):",

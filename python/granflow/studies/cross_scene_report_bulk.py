@@ -22,7 +22,6 @@ from granflow.continuum.channel_model import (
     A_WIDTH,
     ChannelCase,
     law_for,
-    local_law_residuals,
 )
 from granflow.continuum.cooperativity import (
     G_FLOOR,
@@ -41,7 +40,7 @@ from granflow.continuum.verdict import (
     zone_errors,
 )
 from granflow.continuum.wall_layer import (
-    LayerLaws,
+    LayeredPrediction,
     fit_layer_laws,
     layered_table,
     predict_layered,
@@ -141,9 +140,10 @@ def plot_amplitude(bins: pl.DataFrame, table: pl.DataFrame, path: Path) -> Path:
 
 
 def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
-               reference: ChannelCase | None, out: Path, fig_path: Path, rel: Path
-               ) -> list[str]:
-    """The section's markdown; writes ``out/bulk_amplitude.parquet`` and the figure."""
+               reference: ChannelCase | None, residuals: pl.DataFrame, out: Path,
+               fig_path: Path, rel: Path) -> list[str]:
+    """The section's markdown (``residuals``: the DEM's bins against the cell's law, the
+    prediction's); writes ``out/bulk_amplitude.parquet`` and the figures."""
     table = bulk_table(cases, cal, reference)
     table.write_parquet(out / "bulk_amplitude.parquet")
     bins = bin_amplitudes(cases, cal)
@@ -232,15 +232,15 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
     if reference is not None:
         a_bulk = float(table.filter(pl.col("A_ref").is_not_nan())["A_ref"][0])
         lines += layer_lines(layer_table(cases, cal, a_bulk, reference), out)
-        lines += layered_lines(cases, cal, a_bulk, out, fig_path.parent, rel)
+        lines += layered_lines(cases, cal, a_bulk, residuals, out, fig_path.parent, rel)
     return lines
 
 
-def _dense_phi(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]) -> str:
+def _dense_phi(residuals: pl.DataFrame) -> str:
     """How far the dense zone's phi lies from the cell's phi(I) at the bins' own I (the
-    bins in the calibrated range): what the phi half of the target faces in the bulk."""
-    res = pl.concat([local_law_residuals(c, law_for(c, cal).law) for c in cases]).filter(
-        (pl.col("zone") == "dense") & pl.col("in_range"))
+    bins in the calibrated range of the prediction's ``residuals``, section 4's): what the
+    phi half of the target faces in the bulk."""
+    res = residuals.filter((pl.col("zone") == "dense") & pl.col("in_range"))
     if res.height < 2:
         return "too few dense bins in the calibrated range to say how far the cell's phi is"
     d = res["d_phi"].to_numpy()
@@ -251,17 +251,15 @@ def _dense_phi(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]) -
                f"within the {PHI_TARGET:g} target"))
 
 
-def _zone_verdicts(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
-                   laws: LayerLaws, A: float) -> pl.DataFrame:
+def _zone_verdicts(runs: Sequence[tuple[ChannelCase, LayeredPrediction]]) -> pl.DataFrame:
     """The layered model's verdict rows (granflow.continuum.verdict): u - u_slip, and phi
     (the layer's packing laws, the cell's phi(I) beyond; no verdict in the plug)."""
     profs = []
-    for c in cases:
-        pred = predict_layered(c, laws, law_for(c, cal).law, A)
+    for c, pred in runs:
         profs.append(pl.DataFrame({"W": c.W, "phi_bar": c.phi_bar, "seed": c.seed,
                                    "model": "layered", "xi": c.profile["xi"].to_numpy(),
                                    "du": pred.u - pred.u[0], "phi": pred.phi}))
-    return verdict_table(zone_errors(cases, pl.concat(profs)))
+    return verdict_table(zone_errors([c for c, _ in runs], pl.concat(profs)))
 
 
 def _by_fit_width(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float
@@ -284,18 +282,17 @@ def _by_fit_width(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
     return pl.DataFrame(rows)
 
 
-def plot_layered(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
-                 laws: LayerLaws, A: float, path: Path) -> Path:
+def plot_layered(runs: Sequence[tuple[ChannelCase, LayeredPrediction]], A: float,
+                 path: Path) -> Path:
     """u - u_slip and phi across the half channel of the wide runs (W >= WIDE, or all where
     there are none): the DEM with 2 SE bars against the layered model."""
-    wide = [c for c in cases if c.W >= WIDE] or list(cases)
+    wide = [r for r in runs if r[0].W >= WIDE] or list(runs)
     fig = Figure(figsize=(12, 4.5))
     ax, bx = fig.subplots(1, 2)
     colours = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
-    for c, colour in zip(wide, colours, strict=False):
+    for (c, pred), colour in zip(wide, colours, strict=False):
         t = c.profile
         x, u = t["xi"].to_numpy(), t["u"].to_numpy()
-        pred = predict_layered(c, laws, law_for(c, cal).law, A)
         name = c.name
         ax.errorbar(x, u - u[0], yerr=2 * t["u_se"].to_numpy(), fmt="o", ms=3, capsize=2,
                     color=colour, label=f"DEM, {name}")
@@ -316,7 +313,7 @@ def plot_layered(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
 
 
 def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration], A: float,
-                  out: Path, fig_dir: Path, rel: Path) -> list[str]:
+                  residuals: pl.DataFrame, out: Path, fig_dir: Path, rel: Path) -> list[str]:
     """The wall layer as local laws per distance (granflow.continuum.wall_layer), fitted on
     the runs at the reference width and held for the others (``out/layer_laws.parquet``,
     ``out/layered.parquet``)."""
@@ -334,8 +331,9 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
                        pl.col("u_rel_layer").alias("in the layer"),
                        pl.col("u_rel_bulk").alias("in the bulk"),
                        pl.col("du_ratio").alias("u_max - u_slip, model/DEM"))
-    verdicts = _zone_verdicts(cases, cal, laws, A)
-    fig = plot_layered(cases, cal, laws, A, fig_dir / "layered.png")
+    runs = [(c, predict_layered(c, laws, law_for(c, cal).law, A)) for c in cases]
+    verdicts = _zone_verdicts(runs)
+    fig = plot_layered(runs, A, fig_dir / "layered.png")
     wide = tab.filter(pl.col("W") >= WIDE)
     worst = wide["u_rel"].to_numpy()
     n_in = int(np.sum(worst < U_TARGET))
@@ -378,7 +376,7 @@ def layered_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration]
         f"![layered model]({fig.relative_to(rel)})", "",
         "Not tested here: phi in the stress (the runs' own phi profiles give it; the "
         "packing laws and the cell's phi(I) predict phi for the verdicts only; "
-        + _dense_phi(cases, cal) + "), "
+        + _dense_phi(residuals) + "), "
         "u_slip and sigma_xx (taken from each run), and whether the laws hold at W >= 100 "
         "and with replicas (the widths campaign).", ""]
 
