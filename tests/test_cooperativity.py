@@ -9,7 +9,7 @@ import math
 import numpy as np
 import polars as pl
 import pytest
-from granflow.continuum import ChannelProblem, LocalLaw
+from granflow.continuum import ChannelProblem
 from granflow.continuum.channel_model import ChannelCase
 from granflow.continuum.cooperativity import (
     X_BULK,
@@ -20,9 +20,9 @@ from granflow.continuum.cooperativity import (
 )
 from granflow.continuum.given_phi import solve_nonlocal_given_phi
 from granflow.errors import ParameterError
+from model_law import MODEL_LAW
 
-LAW = LocalLaw(mu_s=0.36, A_mu=0.7, a_mu=0.8, phi_0=0.6, A_phi=1e-12, a_phi=0.8, I_min=1e-4,
-               I_max=2.0)
+LAW = MODEL_LAW
 
 
 def model_case(A: float, W: float = 40.0, g_wall: float = 5.0, se: float = 1e-9

@@ -8,7 +8,6 @@ import math
 import numpy as np
 import polars as pl
 import pytest
-from granflow.continuum import LocalLaw
 from granflow.continuum.channel_model import ChannelCase
 from granflow.continuum.wall_layer import (
     LayerLaws,
@@ -17,9 +16,9 @@ from granflow.continuum.wall_layer import (
     predict_layered,
 )
 from granflow.errors import ParameterError
+from model_law import MODEL_LAW
 
-LAW = LocalLaw(mu_s=0.36, A_mu=0.7, a_mu=0.8, phi_0=0.6, A_phi=1e-12, a_phi=0.8, I_min=1e-4,
-               I_max=2.0)
+LAW = MODEL_LAW
 XI = (0.75, 2.0, 3.0, 4.0)
 LAWS = LayerLaws(XI, (40.0, 20.0, 18.0, 19.0), (4.0, 4.2, 4.6, 4.8), "made up")
 
