@@ -1,6 +1,7 @@
 """The report of the 002 campaign (:mod:`granflow.studies.reproduce_002`): Table 1 rows beside
-the paper's, figures 3-8, the size effect, the ratios without a steady state, error against run
-time, wall time per piece and the paper-scale recipe with its core-hours."""
+the paper's, the offsets from 002's laws and what they come from, figures 3-8, the size
+effect, the ratios without a steady state, error against run time, wall time per piece and
+the paper-scale recipe with its core-hours."""
 
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from ._campaign import (
 )
 from ._campaign.cell import STUDY, Point
 from .reproduce_002_figures import plot_figures
+from .reproduce_002_report_offsets import decided_lines
 
 #: the laws' parameters, in the order of the report's table
 PARAMS = (("A1", "mu1"), ("A2", "mu2"), ("A3", "mu3"), ("A4", "phi"), ("mu1_0", "mu1"),
@@ -231,8 +233,19 @@ def protocol_checks(out: Path) -> list[str]:
              else "p_ext = 1e-4; the checks were run there only")
     lines += ["Where both agree, the offsets from 002's laws found above are neither this "
               f"code's nor the protocol's at those points ({where}); what remains is 002's "
-              "set-up.", ""]
+              "set-up. How much room the checks' errors leave, offset by offset: 'The offsets, "
+              "decided' below.", ""]
     return lines
+
+
+def check_tables(out: Path) -> tuple[list[pl.DataFrame], pl.DataFrame | None]:
+    """The granflow-against-LAMMPS tables at every pressure and the stress/rate equivalence
+    table beside the dataset ``out``, those that exist (the data of :func:`protocol_checks`)."""
+    paths = [out.parent.joinpath(*LAMMPS_TABLE)] + [
+        out.parent / name / "table.parquet" for name, _ in LAMMPS_LOW_P]
+    eq = out.parent.joinpath(*EQUIVALENCE_TABLE)
+    return ([pl.read_parquet(p) for p in paths if p.exists()],
+            pl.read_parquet(eq) if eq.exists() else None)
 
 
 KEYS = ("mu_s", "N", "p_ext", "tau_ratio")
@@ -874,6 +887,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   discussion(off, curve_comparison(pool, fits, n_main), rows,
                              checked=bool(protocol_checks(out))), ""]
     lines += protocol_checks(out)
+    lines += decided_lines(off, *check_tables(out))
     lines += ["## Points", "",
               "Every point's replica mean; ± the point's SE, the larger of the within-run SE "
               "(from the runs' own blocking SEs) and the between-replica SE (from their spread, "
