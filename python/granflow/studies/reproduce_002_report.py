@@ -198,12 +198,19 @@ def _shift_lines(shift: pl.DataFrame, where: Path, p_ext: float, reference: Path
                 "codes_z", "codes"), {"mu_s": "g", "I": "g", "codes_z": "+.2f"}), ""]
 
 
+def _check_paths(out: Path) -> tuple[Path, list[tuple[Path, float]], Path]:
+    """Where the checks beside the dataset ``out`` live: LAMMPS_TABLE's file, LAMMPS_LOW_P's
+    folders with their pressures, EQUIVALENCE_TABLE's file."""
+    return (out.parent.joinpath(*LAMMPS_TABLE),
+            [(out.parent / name, p) for name, p in LAMMPS_LOW_P],
+            out.parent.joinpath(*EQUIVALENCE_TABLE))
+
+
 def protocol_checks(out: Path) -> list[str]:
     """The section on whether the offsets are this code's or the protocol's, from the tables
     beside the dataset ``out`` (LAMMPS_TABLE, EQUIVALENCE_TABLE, and LAMMPS_LOW_P's tables and
     shifts where present); empty when neither of the first two is there."""
-    lmp, eq = (out.parent.joinpath(*t) for t in (LAMMPS_TABLE, EQUIVALENCE_TABLE))
-    lows = [(out.parent / name, p) for name, p in LAMMPS_LOW_P]
+    lmp, lows, eq = _check_paths(out)
     if not (lmp.exists() or eq.exists()):
         return []
     lines = ["## This code, or the protocol?", ""]
@@ -241,9 +248,8 @@ def protocol_checks(out: Path) -> list[str]:
 def check_tables(out: Path) -> tuple[list[pl.DataFrame], pl.DataFrame | None]:
     """The granflow-against-LAMMPS tables at every pressure and the stress/rate equivalence
     table beside the dataset ``out``, those that exist (the data of :func:`protocol_checks`)."""
-    paths = [out.parent.joinpath(*LAMMPS_TABLE)] + [
-        out.parent / name / "table.parquet" for name, _ in LAMMPS_LOW_P]
-    eq = out.parent.joinpath(*EQUIVALENCE_TABLE)
+    lmp, lows, eq = _check_paths(out)
+    paths = [lmp] + [low / "table.parquet" for low, _ in lows]
     return ([pl.read_parquet(p) for p in paths if p.exists()],
             pl.read_parquet(eq) if eq.exists() else None)
 
@@ -876,6 +882,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
              "", _verdicts(rows), "", table1_markdown(rows), ""]
     lines += collapse_section(pool, n_main)
     off = offsets(pool, n_main)
+    checks = protocol_checks(out)
     if off.height:
         lines += ["## Against the paper's curves at our I", "",
                   "Where 002 gives all of a law's constants (mu_s = 0 and 0.3, §4), the mean "
@@ -885,8 +892,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
                   md_table(off, {**{c: ".4f" for c in off.columns if c != "mu_s"},
                                   "p_ext": ".0e"}), "",
                   discussion(off, curve_comparison(pool, fits, n_main), rows,
-                             checked=bool(protocol_checks(out))), ""]
-    lines += protocol_checks(out)
+                             checked=bool(checks)), ""]
+    lines += checks
     lines += decided_lines(off, *check_tables(out))
     lines += ["## Points", "",
               "Every point's replica mean; ± the point's SE, the larger of the within-run SE "

@@ -24,8 +24,8 @@ LEAST = f"least |offset| - {AGREE_SIGMA:g} SE"
 
 def _lammps_rows(t: pl.DataFrame, q: str) -> pl.DataFrame:
     """The rows of granflow-against-LAMMPS tables (benchmarks/lammps_rate_cell.py; ``table``
-    tells one pressure's from another's) that
-    check 002's quantity ``q``, as mu_s, I, diff, se. LAMMPS's table has mu = |sigma_xy| /
+    tells one pressure's from another's) that check 002's quantity ``q``, as mu_s, I, diff,
+    se. LAMMPS's table has mu = |sigma_xy| /
     sigma_yy, not mu1 = tau/p: they differ by the factor sigma_yy/p = 1 - (N1 - N2)/(3p),
     which both codes share within the N rows, so a code difference in mu1 is one in mu to
     first order. mu2 = (N1 + 2 N2)/(2p) (the projection on D^2's deviator in simple shear,
