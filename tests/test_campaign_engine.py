@@ -249,3 +249,50 @@ def test_the_cell_reports_runs_left_count_rows_from_before_the_rule_as_to_run():
     old = points.with_columns(pl.when(pl.int_range(pl.len()) < 3).then(None)
                               .otherwise(pl.col("tau_max")).alias("tau_max"))
     assert left(old) == n + 3
+
+
+class Snapshot(Scripted):
+    """Scripted, with a table measured once on the last state (Study.final)."""
+
+    tables = {"sample_rows": "samples", "final_rows": "snapshots"}
+    final_tables = ("final_rows",)
+
+    def final(self, point: Point, scene: Scene) -> dict[str, list[dict[str, Any]]]:
+        return {"final_rows": [{"name": point.name, "time": scene.time,
+                                "stints": scene.stints}]}
+
+
+def test_final_rows_come_from_the_last_state_once(tmp_path: Path):
+    d = run_points(Snapshot(), POINTS, Plan(), tmp_path, workers=1, log=lambda *_: None)
+    snap = pl.read_parquet(tmp_path / "snapshots.parquet")
+    # one row per point that ended without an error, from its last state
+    assert sorted(snap["name"].to_list()) == ["arrests", "runs_out"]
+    by = {r["name"]: r for r in snap.iter_rows(named=True)}
+    assert by["runs_out"]["time"] == 10.0 and by["arrests"]["stints"] == 4
+    assert "final_rows" not in d.columns
+
+
+def test_finished_points_gain_final_rows_from_their_checkpoints(tmp_path: Path):
+    from granflow.studies._campaign import add_final_rows
+
+    run_points(Scripted(), POINTS, Plan(), tmp_path, workers=1, log=lambda *_: None)
+    assert not (tmp_path / "snapshots.parquet").exists()
+    # the points finished before the study measured its snapshot: measured from their
+    # checkpoints, once; a point without its checkpoint (another machine) stays without
+    (tmp_path / "work" / "arrests" / "checkpoint.gfck").unlink()
+    assert add_final_rows(Snapshot(), Point, Plan(), tmp_path) == 1
+    snap = pl.read_parquet(tmp_path / "snapshots.parquet")
+    assert snap.select("name", "time").rows() == [("runs_out", 10.0)]
+    assert add_final_rows(Snapshot(), Point, Plan(), tmp_path) == 0
+
+
+def test_reanalyse_keeps_the_rows_it_does_not_recompute(tmp_path: Path):
+    run_points(Snapshot(), POINTS, Plan(), tmp_path, workers=1, log=lambda *_: None)
+    before = pl.read_parquet(tmp_path / "snapshots.parquet").sort("name")
+    samples = pl.read_parquet(tmp_path / "samples.parquet").sort("name", "t")
+    # a point whose work directory is gone is kept as it is, with its rows of every table
+    for f in (tmp_path / "work" / "arrests").iterdir():
+        f.unlink()
+    assert reanalyse(Snapshot(), Point, Plan(), tmp_path) == 0
+    assert pl.read_parquet(tmp_path / "snapshots.parquet").sort("name").equals(before)
+    assert pl.read_parquet(tmp_path / "samples.parquet").sort("name", "t").equals(samples)

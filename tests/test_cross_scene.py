@@ -353,3 +353,67 @@ def test_the_bins_phi_slope_takes_its_se_from_bins_whose_stencils_do_not_overlap
     _, se_tilted = _local_phi_slope(bins.with_columns(
         pl.Series("A", 0.4 + 2.0 * (phi - 0.62) + tilt)))
     assert se_tilted >= np.std([5.0, 2.0, -1.0], ddof=1) / np.sqrt(3) * 0.99
+
+
+def _replicated(tmp_path: Path, shifts=(-0.2, 0.0, 0.5), depths=(20.0,)) -> Path:
+    """The committed W = 40, phi_bar = 0.6 run as three replicas (u shifted by ``shifts``,
+    the second's wall bin labelled 'loose') and as one run at each of ``depths``."""
+    pts = pl.read_parquet(CHANNEL / "points.parquet").filter(
+        (pl.col("W") == 40) & (pl.col("phi_bar") == 0.6))
+    prof = pl.read_parquet(CHANNEL / "profiles.parquet")
+    key = ["W", "phi_bar", "kn", "B", "H", "seed", "parent"]
+    prof = prof.join(pts.select(key), on=key, how="semi")
+    b0 = float(pts["B"][0])
+    p_rows, f_rows = [], []
+    for seed, du in enumerate(shifts, start=1):
+        p_rows.append(pts.with_columns(seed=pl.lit(seed, dtype=pts["seed"].dtype),
+                                       sigma_xx_mean=pl.col("sigma_xx_mean") + du))
+        f = prof.with_columns(seed=pl.lit(seed, dtype=prof["seed"].dtype), u=pl.col("u") + du)
+        if seed == 2:
+            f = f.with_columns(zone=pl.when(pl.int_range(pl.len()) == 0).then(pl.lit("loose"))
+                               .otherwise(pl.col("zone")))
+        f_rows.append(f)
+    for b in depths:
+        p_rows.append(pts.with_columns(B=pl.lit(b)))
+        f_rows.append(prof.with_columns(B=pl.lit(b), u=pl.col("u") + 3.0))
+    pl.concat(p_rows).write_parquet(tmp_path / "points.parquet")
+    pl.concat(f_rows).write_parquet(tmp_path / "profiles.parquet")
+    assert b0 not in depths
+    return tmp_path
+
+
+def test_channel_cases_average_replicas_bin_by_bin_with_the_replica_se(tmp_path):
+    d = _replicated(tmp_path)
+    with pytest.warns(UserWarning, match=r"another depth than the main B = 10 .*B = 20"):
+        apart = cm.channel_cases(d)
+    assert [c.seed for c in apart] == [1, 2, 3]
+    with pytest.warns(UserWarning, match="another depth"):
+        (mean,) = cm.channel_cases(d, replicas="mean")
+    assert mean.replicas == 3 and mean.seed is None and "3 replicas" in mean.name
+    u = np.array([c.profile["u"].to_numpy() for c in apart])
+    se = np.array([c.profile["u_se"].to_numpy() for c in apart])
+    np.testing.assert_allclose(mean.profile["u"].to_numpy(), u.mean(axis=0), rtol=1e-12)
+    within = np.sqrt((se**2).sum(axis=0)) / 3
+    between = replicas.small_sample_factor(3) * u.std(axis=0, ddof=1) / math.sqrt(3)
+    np.testing.assert_allclose(mean.profile["u_se"].to_numpy(), np.maximum(within, between),
+                               rtol=1e-12)
+    assert (mean.profile["u_se"].to_numpy() > se.max(axis=0)).all()  # the shifts dominate
+    # the zone most replicas give; the bins' edges kept; the boundary data the means
+    assert mean.profile["zone"].to_list() == apart[0].profile["zone"].to_list()
+    np.testing.assert_array_equal(mean.profile["xi_lo"].to_numpy(),
+                                  apart[0].profile["xi_lo"].to_numpy())
+    assert mean.sigma_xx == pytest.approx(np.mean([c.sigma_xx for c in apart]), rel=1e-12)
+    assert mean.problem().u_wall == pytest.approx(u[:, 0].mean(), rel=1e-12)
+    # the other depth on request, alone
+    (deep,) = cm.channel_cases(d, B=20)
+    assert deep.profile["u"][0] == pytest.approx(apart[0].profile["u"][0] + 3.2, rel=1e-12)
+
+
+def test_channel_cases_refuse_an_unknown_replica_mode_or_depth(tmp_path):
+    d = _replicated(tmp_path)
+    with pytest.raises(ParameterError, match=r"invalid replicas = 'median': allowed one of "
+                                             r"'apart', 'mean'"):
+        cm.channel_cases(d, replicas="median")
+    with pytest.raises(ParameterError, match=r"invalid B = 30: no steady run at that depth; "
+                                             r"allowed one of 10, 20"):
+        cm.channel_cases(d, B=30)

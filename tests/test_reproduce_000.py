@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import polars as pl
 import pytest
 from granflow.analysis.stats import MIN_SE_BLOCKS
@@ -117,3 +118,18 @@ def test_the_command_line_writes_the_report(quick, capsys):
     assert (out / "cli.md").exists() and "report:" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         rp.main(["--quick", "--full"])  # one mode at a time
+
+
+def test_every_finished_point_has_its_order_across_the_channel(quick):
+    plan, out = quick
+    d = pl.read_parquet(out / "points.parquet")
+    order = pl.read_parquet(out / "order.parquet")
+    for r in d.iter_rows(named=True):
+        o = order.filter(*(pl.col(c) == r[c] for c in ("W", "phi_bar", "kn", "seed")))
+        # the channel's bins from wall to wall, taken at the run's last state, folded onto
+        # the half profile's distance from the nearer wall
+        assert o.height > 0 and (o["t"] == r["t_run"]).all()
+        assert o["particles"].sum() == r["n"]
+        x = o["x"].to_numpy()
+        assert np.allclose(o["xi"].to_numpy(), np.minimum(x, r["W"] - x), rtol=0, atol=1e-12)
+        assert o["Q6"].is_between(0.0, 1.0).all() and o["Z"].is_between(3.0, 13.0).all()

@@ -184,9 +184,9 @@ def test_the_report_regenerates_from_a_tiny_dataset(rows, tmp_path):
     pts.append(few)
     extra["profile_rows"] += [{**r, "W": 60.0} for r in extra["profile_rows"][:11]]
     pl.from_dicts(pts, infer_schema_length=None).write_parquet(tmp_path / "points.parquet")
-    for k, stem in rp.ROW_TABLES.items():
+    for k in extra:  # (no order.parquet: a dataset from before the snapshot's order)
         pl.from_dicts(extra[k], infer_schema_length=None).write_parquet(
-            tmp_path / f"{stem}.parquet")
+            tmp_path / f"{rp.ROW_TABLES[k]}.parquet")
     text = write_report(tmp_path, tmp_path / "r.md", rp.full_plan(), rp.paper_plan()
                         ).read_text()
     assert "§3.3" not in text and "§3.2" in text
@@ -371,3 +371,30 @@ def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path)
     text = "\n".join(remaining(tmp_path, rp.full_plan(), 4e6))
     assert "The widths (`--widths`" in text and "carries this one's question on" in text
     assert "carries" not in "\n".join(remaining(tmp_path, rp.widths_plan(), 4e6))
+
+
+def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():
+    from granflow.studies.reproduce_000_report_order import order_lines, run_order
+
+    run = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0}
+    xi = [0.75, 2.0, 3.0, 4.0]
+    zone = ["wall", "dense", "plug", "plug"]
+    prof = pl.DataFrame([{**run, "seed": s, "xi": x, "zone": z}
+                         for s in (1, 2) for x, z in zip(xi, zone, strict=True)])
+    # both halves of a W = 8 stand-in: x and W - x fold onto the same xi
+    def order(xtal: float) -> pl.DataFrame:
+        return pl.DataFrame([{**run, "seed": s, "t": 100.0, "x": x, "xi": x, "particles": 100,
+                              "bonds": 1000, "Q6": 0.05 if z != "wall" else 0.12,
+                              "crystal_fraction": xtal if z == "plug" else 0.0, "Z": 10.0}
+                             for s in (1, 2) for x, z in zip(xi, zone, strict=True)
+                             for _ in (0, 1)])
+    values = pl.DataFrame([{**run, "phi_plug": 0.647, "phi_plug_se": 0.002}])
+    r = run_order(order(0.0), prof)
+    plug = r.filter(pl.col("zone") == "plug")
+    assert plug.height == 2 and (plug["spheres"] == 400).all()
+    assert plug["Q6_random"][0] == pytest.approx(1 / math.sqrt(4000))
+    text = "\n".join(order_lines(order(0.0), prof, values))
+    assert "The plug is amorphous in every run" in text and "0.6470 ± 0.0020" in text
+    text = "\n".join(order_lines(order(0.9), prof, values))
+    assert "2 of 2 runs have an ordered plug" in text and "seed 1: 90.0%" in text
+    assert order_lines(order(0.0).head(0), prof, values) == []

@@ -30,7 +30,7 @@ from scipy import stats
 
 from .tables import TableLike, to_polars
 
-__all__ = ["DISAGREE_P", "MIN_REPLICAS", "replica_mean", "small_sample_factor"]
+__all__ = ["DISAGREE_P", "MIN_REPLICAS", "mean_profiles", "replica_mean", "small_sample_factor"]
 
 #: fewest replicas for a between-replica SE (one replica: the within SE alone)
 MIN_REPLICAS = 2
@@ -86,3 +86,30 @@ def replica_mean(df: TableLike, by: Sequence[str],
         groups.append(row)
     return pl.from_dicts(groups, infer_schema_length=None).sort(list(by)) if groups \
         else pl.DataFrame()
+
+
+def mean_profiles(profiles: TableLike, by: Sequence[str], at: str = "xi",
+                  keep: Sequence[str] = (), labels: Sequence[str] = ()) -> pl.DataFrame:
+    """Binned profiles of replicas (one row per run and bin) averaged bin by bin: one row per
+    group of ``by`` (a campaign point; pass only the replicas that count) and bin ``at``, with
+    every profile quantity (a column ``X`` with ``X_se`` beside it, ``by`` and ``at`` aside)
+    as :func:`replica_mean` gives it. ``keep``: columns equal for every replica of a bin (its
+    edges), taken from the first; ``labels``: per-bin labels (a zone), the one most replicas
+    give (the first of a tie)."""
+    d = to_polars(profiles)
+    if not d.height:
+        return d
+    key = [*by, at]
+    qs = [c for c in d.columns if f"{c}_se" in d.columns and c not in key]
+    d = d.with_columns(*(pl.col(c).cast(pl.Float64) for c in (*qs, *(f"{q}_se" for q in qs))))
+    out = replica_mean(d, key, qs)
+    if keep:
+        out = out.join(d.group_by(key, maintain_order=True).agg(pl.col(list(keep)).first()),
+                       on=key, how="left")
+    for name in labels:
+        # (the most common label, first-seen order breaking a tie)
+        mode = (d.group_by([*key, name], maintain_order=True).len()
+                .sort("len", descending=True, maintain_order=True)
+                .group_by(key, maintain_order=True).agg(pl.col(name).first()))
+        out = out.join(mode, on=key, how="left")
+    return out.sort(key)

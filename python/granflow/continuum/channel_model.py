@@ -58,13 +58,16 @@ class ChannelCase:
     profile: pl.DataFrame
     sigma_xx: float
     delta_095: float
-    #: the run's seed (replicas of a point are cases of their own)
+    #: the run's seed (replicas of a point are cases of their own); None for a replica mean
     seed: int | None = None
+    #: how many runs the case averages (channel_cases(replicas="mean"))
+    replicas: int = 1
 
     @property
     def name(self) -> str:
         return (f"W = {self.W:g}, phi_bar = {self.phi_bar:g}"
-                + (f", seed {self.seed}" if self.seed is not None else ""))
+                + (f", seed {self.seed}" if self.seed is not None else "")
+                + (f", {self.replicas} replicas" if self.replicas > 1 else ""))
 
     def problem(self, k: int = 0) -> ChannelProblem:
         """Boundary data at the centre of bin ``k`` (0: the wall bin, whose u is u_slip):
@@ -86,12 +89,25 @@ CASE_COLUMNS = ("W", "phi_bar", "kn", "parent", "state", "u_slip", "sigma_xx_mea
 PROFILE_KEY = ("W", "phi_bar", "kn", "parent", "B", "H", "seed", "prep")
 
 
+#: how channel_cases returns the replicas of a point
+REPLICAS = ("apart", "mean")
+
+
 def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
-                  include_unconverged: bool = False) -> list[ChannelCase]:
-    """The steady runs at ``kn`` of a reproduce_000 dataset (points and profiles), one case
-    per run (replicas apart). Runs that did not meet their plan's stop rule (``converged``
+                  include_unconverged: bool = False, replicas: str = "apart",
+                  B: float | None = None) -> list[ChannelCase]:
+    """The steady runs at ``kn`` and depth ``B`` of a reproduce_000 dataset (points and
+    profiles). ``replicas``: "apart", one case per run; "mean", one per point (W, phi_bar),
+    its profile the replicas' bin-by-bin mean with the larger of the within-run and
+    between-replica SEs (granflow.analysis.replicas.mean_profiles; each bin's zone the one
+    most replicas give), sigma_xx and delta_0.95 the replicas' means. ``B``: None takes the
+    dataset's most common depth (the main one; a depth check's other depths are left out with
+    a warning naming them). Runs that did not meet their plan's stop rule (``converged``
     false) are left out with a warning naming them, unless ``include_unconverged``."""
     d = Path(channel)
+    if replicas not in REPLICAS:
+        raise ParameterError(f"invalid replicas = {replicas!r}: allowed one of "
+                             f"{', '.join(map(repr, REPLICAS))}")
     what = "allowed a reproduce_000 dataset, e.g. docs/data/reproduce_000 of a granflow checkout"
     missing = [f for f in ("points.parquet", "profiles.parquet") if not (d / f).is_file()]
     if missing:
@@ -108,6 +124,19 @@ def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
         raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: its points "
                              f"lack the columns {', '.join(lacking)} ({what})")
     pts = pts.filter((pl.col("kn") == kn) & pl.col("u_slip").is_not_null())
+    if "B" in pts.columns and pts.height:
+        depth = float(pts["B"].mode().sort()[0]) if B is None else float(B)
+        if depth not in pts["B"].to_list():
+            raise ParameterError(f"invalid B = {B!r}: no steady run at that depth; allowed one "
+                                 "of " + ", ".join(f"{b:g}" for b in pts["B"].unique().sort()))
+        other = pts.filter(pl.col("B") != depth)
+        if other.height and B is None:
+            warnings.warn(f"channel_cases: {other.height} steady run(s) at another depth than "
+                          f"the main B = {depth:g} are left out: "
+                          + "; ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g}, B = "
+                                      f"{r['B']:g}" for r in other.iter_rows(named=True))
+                          + " (B= takes them)", UserWarning, stacklevel=2)
+        pts = pts.filter(pl.col("B") == depth)
     if "converged" in pts.columns and not include_unconverged:
         left = pts.filter(~pl.col("converged"))
         if left.height:
@@ -119,15 +148,38 @@ def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
         pts = pts.filter(pl.col("converged"))
     prof = pl.read_parquet(d / "profiles.parquet")
     key = [c for c in PROFILE_KEY if c in pts.columns and c in prof.columns]
-    out = []
+    runs = []
     for r in pts.sort("W", "phi_bar", *(["seed"] if "seed" in key else [])).iter_rows(
             named=True):
         p = prof.filter(*(pl.col(c) == r[c] for c in key)).sort("xi")
-        out.append(ChannelCase(r["W"], r["phi_bar"], kn, p, r["sigma_xx_mean"],
-                               r["delta_095"], r.get("seed")))
-    if not out:
+        runs.append(ChannelCase(r["W"], r["phi_bar"], kn, p, r["sigma_xx_mean"],
+                                r["delta_095"], r.get("seed")))
+    if not runs:
         raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no steady run "
                              f"at kn = {kn:g} ({what})")
+    return runs if replicas == "apart" else _replica_means(runs)
+
+
+def _replica_means(runs: Sequence[ChannelCase]) -> list[ChannelCase]:
+    """One case per (W, phi_bar) of ``runs`` (channel_cases' "mean")."""
+    from granflow.analysis.replicas import mean_profiles
+
+    groups: dict[tuple[float, float], list[ChannelCase]] = {}
+    for c in runs:
+        groups.setdefault((c.W, c.phi_bar), []).append(c)
+    out = []
+    for (w, pb), g in groups.items():
+        if len({c.profile.height for c in g}) != 1:
+            raise ParameterError(f"invalid channel dataset: the replicas at W = {w:g}, phi_bar "
+                                 f"= {pb:g} have different bins ({[c.profile.height for c in g]})")
+        tab = pl.concat([c.profile for c in g], how="diagonal_relaxed")
+        labels = [c for c in ("zone",) if c in tab.columns]
+        keep = [c for c in ("xi_lo", "xi_hi") if c in tab.columns]
+        mean = mean_profiles(tab, [c for c in ("W", "phi_bar") if c in tab.columns],
+                             keep=keep, labels=labels)
+        out.append(ChannelCase(w, pb, g[0].kn, mean,
+                               float(np.mean([c.sigma_xx for c in g])),
+                               float(np.mean([c.delta_095 for c in g])), None, len(g)))
     return out
 
 
@@ -167,16 +219,17 @@ def run_case(run: str | os.PathLike[str], n_particles: int | None = None) -> Cha
 
 
 def cases_of(source: str | os.PathLike[str] | ChannelCase | Sequence[ChannelCase],
-             kn: float = 1e5) -> list[ChannelCase]:
+             kn: float = 1e5, replicas: str = "apart") -> list[ChannelCase]:
     """The cases a prediction takes from ``source``: a reproduce_000 dataset
-    (:func:`channel_cases`), one run's directory (:func:`run_case`), or cases."""
+    (:func:`channel_cases`, its ``replicas`` apart or averaged), one run's directory
+    (:func:`run_case`), or cases."""
     if isinstance(source, ChannelCase):
         return [source]
     if isinstance(source, (str, os.PathLike)):
         d = Path(source)
         if (d / "bins.parquet").is_file() and not (d / "points.parquet").is_file():
             return [run_case(d)]
-        return channel_cases(d, kn)
+        return channel_cases(d, kn, replicas=replicas)
     out = list(source)
     if not out or not all(isinstance(c, ChannelCase) for c in out):
         raise ParameterError(f"invalid source = {source!r}: allowed a reproduce_000 dataset, "

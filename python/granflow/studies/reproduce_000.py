@@ -59,7 +59,7 @@ from granflow.analysis.estimate import Estimate
 from granflow.material import MATERIAL_000
 from granflow.states import FlowState
 
-from ._campaign import Study, done_keys, fmt, run_points
+from ._campaign import Study, add_final_rows, done_keys, fmt, run_points
 from ._campaign import reanalyse as engine_reanalyse
 
 #: the steady part's fractions at which the SE is recorded (error against run time)
@@ -332,7 +332,20 @@ def converged(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
         for k in ("u_slip", "u_max"))
 
 
-ROW_TABLES = {"profile_rows": "profiles", "zone_rows": "zones", "se_rows": "se_vs_time"}
+ROW_TABLES = {"profile_rows": "profiles", "zone_rows": "zones", "se_rows": "se_vs_time",
+              "order_rows": "order"}
+
+
+def order_rows(point: Point, scene: Any) -> list[dict[str, Any]]:
+    """The bond-orientational order across the channel of ``scene``'s present state
+    (Channel.order_profile: Q6, crystal-like fraction, coordination per bin), a row per bin
+    with the point's fields, the time, and ``xi`` = min(x, W - x), the distance from the
+    nearer wall (the half profiles' bins)."""
+    prof = scene.order_profile()
+    t = float(scene.core.time)
+    return [{**asdict(point), "t": t, "xi": min(r["x"], point.W - r["x"]),
+             **{k: r[k] for k in ("x", "particles", "bonds", "Q6", "crystal_fraction", "Z")}}
+            for r in prof.iter_rows(named=True)]
 
 
 class ChannelStudy(Study):
@@ -342,6 +355,7 @@ class ChannelStudy(Study):
     with ``prep_seconds``, the preparation's wall time (``wall_seconds`` is all of it)."""
 
     tables = ROW_TABLES
+    final_tables = ("order_rows",)
 
     def scene(self, point: Point, plan: Plan, threads: int) -> Any:
         from granflow.scenes.channel import Channel
@@ -380,6 +394,10 @@ class ChannelStudy(Study):
         n = context.get("n") if point.prep == "rain" else None
         return point_row(point, plan, tables["bins"], tables["series"], n)
 
+    def final(self, point: Point, scene: Any) -> dict[str, list[dict[str, Any]]]:
+        # (the plug's order, issue 36: a snapshot of the last state)
+        return {"order_rows": order_rows(point, scene)}
+
     def stop(self, row: Mapping[str, Any], point: Point, plan: Plan,
              history: Sequence[str]) -> str | None:
         if row["converged"]:
@@ -398,7 +416,9 @@ STUDY = ChannelStudy()
 def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
     """Recompute the finished points of ``out`` from their tables (the engine's
     :func:`~granflow.studies._campaign.engine.reanalyse`); returns the number dropped."""
-    return engine_reanalyse(STUDY, Point, plan, out)
+    dropped = engine_reanalyse(STUDY, Point, plan, out)
+    add_final_rows(STUDY, Point, plan, out)
+    return dropped
 
 
 # --------------------------------------------------------------------------------------------
@@ -419,6 +439,9 @@ def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = 
     its later points; each finished point is appended there as it completes."""
     kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "threads": threads,
                           "describe": _describe, "log": log}
+    if (n := add_final_rows(STUDY, Point, plan, out)):
+        log(f"{plan.name}: the order across the channel measured on {n} finished points' last "
+            "states")
     done = done_keys(Path(out), Point, STUDY)
     ready = tuple(b for b in plan.branches if b.parent in done)
     run_points(STUDY, (*ready, *plan.points), plan, out, name=plan.name, **kw)

@@ -22,12 +22,14 @@ from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, sc
 from granflow.analysis.compare import AGREE_SIGMA, agrees, difference_z, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import save_figure
+from granflow.analysis.replicas import mean_profiles as replica_profiles
 from granflow.analysis.replicas import replica_mean
 from granflow.analysis.rheology import pool_realizations
 from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
 from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
+from .reproduce_000_report_order import order_lines
 
 #: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
 RATIO_PAPER = (1.37, 1.40)
@@ -545,14 +547,9 @@ def plot_fig7(steady: pl.DataFrame, path: Path) -> Path:
 
 def mean_profiles(profiles: pl.DataFrame) -> pl.DataFrame:
     """The half profiles of each point (POINT_BY) over its replicas (pass the steady ones):
-    per bin ``xi`` every profile quantity's replica mean and SE (replica_mean)."""
-    if not profiles.height:
-        return profiles
-    # (the profile quantities: the columns with an SE beside them)
-    qs = [c for c in profiles.columns if f"{c}_se" in profiles.columns and c not in POINT_BY]
-    d = profiles.with_columns(*(pl.col(c).cast(pl.Float64) for c in
-                                (*qs, *(f"{q}_se" for q in qs))))
-    return replica_mean(d, [*POINT_BY, "xi"], qs).sort([*POINT_BY, "xi"])
+    per bin ``xi`` every profile quantity's replica mean and SE
+    (granflow.analysis.replicas.mean_profiles)."""
+    return replica_profiles(profiles, POINT_BY)
 
 
 #: bins whose |du/dx| is below this fraction of the largest set no y-range of the panels named
@@ -759,7 +756,7 @@ def _fig5_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) ->
 
 
 def _zones_section(steady: pl.DataFrame, profiles: pl.DataFrame, means: pl.DataFrame,
-                   figdir: Path) -> Section:
+                   order: pl.DataFrame, figdir: Path) -> Section:
     lines = ["## Zones, plug and conduction length (§3.2, figs 8-9, B13)", "",
              f"000: φ in the plug ~{PHI_PLUG_PAPER} (two decimals: 0.625-0.635), Ω_z/ω_z = 1/2 "
              f"in the shearing zones, l_c ≈ {L_C_PAPER} d, σxx ∝ W (fig. 7a), μ_wall "
@@ -774,7 +771,8 @@ def _zones_section(steady: pl.DataFrame, profiles: pl.DataFrame, means: pl.DataF
              "(φ_ad - φ)^-1 with φ_ad = 0.59 ± 0.002): a fit to the loose-zone bins with an "
              "SE of every steady point, pooled:", "",
              md_table(phi_ad_fits(profiles), {"χ²/dof": ".2f",
-                                              "from 0.59 ± 0.002 (SEs)": "+.1f"}), ""]
+                                              "from 0.59 ± 0.002 (SEs)": "+.1f"}), "",
+             *order_lines(order, profiles, steady)]
     wide = steady.filter(pl.col("W") == steady["W"].max())
     w = f"W = {wide['W'][0]:g}"
     # units: lengths d, velocities √(gd), stresses ρ_p g d (granflow.analysis.channel_profiles)
@@ -1335,7 +1333,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
                 _se_section(se, figdir), (_coverage_section(points, out), [])]
     if steady.height:
         sections[:0] = [_fig5_section(steady, means, figdir),
-                        _zones_section(steady, profiles, means, figdir)]
+                        _zones_section(steady, profiles, means,
+                                       _of_steady(points, _read(out, "order")), figdir)]
     for text, f in sections:
         lines += text
         figs += f

@@ -13,6 +13,7 @@ checkpoints under ``OUT/work/``.
 from .command import cli
 from .engine import (
     Study,
+    add_final_rows,
     done_keys,
     error_state,
     fmt,
@@ -34,6 +35,7 @@ from .report import (
     pm_column,
 )
 
-__all__ = ["Study", "cli", "core_seconds", "cost", "dask_recipe", "done_keys", "error_state",
-           "fmt", "keys_done", "md_table", "paper_scale_estimate", "plot_campaign_se", "pm",
-           "pm_column", "point_of", "reanalyse", "run_point", "run_points", "write_rows"]
+__all__ = ["Study", "add_final_rows", "cli", "core_seconds", "cost", "dask_recipe", "done_keys",
+           "error_state", "fmt", "keys_done", "md_table", "paper_scale_estimate",
+           "plot_campaign_se", "pm", "pm_column", "point_of", "reanalyse", "run_point",
+           "run_points", "write_rows"]

@@ -115,6 +115,8 @@ class Study:
 
     #: rows returned under these keys of a point's row go to ``OUT/<stem>.parquet``
     tables: Mapping[str, str] = {}
+    #: the keys of :attr:`tables` whose rows :meth:`final` gives (not :meth:`row`)
+    final_tables: tuple[str, ...] = ()
 
     def scene(self, point: Any, plan: Any, threads: int) -> Any:
         """The point's scene, built (not yet prepared): the one place a study builds it."""
@@ -145,6 +147,12 @@ class Study:
         """The point's row from its tables: the point's fields, ``state``, ``converged`` and
         the measurements; the rows of further tables under the keys of :attr:`tables`."""
         raise NotImplementedError
+
+    def final(self, point: Any, scene: Any) -> dict[str, list[dict[str, Any]]]:
+        """Rows of the tables :attr:`final_tables` measured once on a point's last state,
+        after its last stint (a snapshot's analysis): nothing by default. Also
+        what :func:`add_final_rows` gives a finished point from its checkpoint."""
+        return {}
 
     def failure(self, scene: Any, context: Mapping[str, Any]) -> dict[str, Any]:
         """Further fields of the row of a point that ended with an error."""
@@ -233,6 +241,8 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
         error = exc
     if error is not None or not row:
         row = study.row(point, plan, scene.tables(), context)
+    if error is None:
+        row.update(study.final(point, scene))
     if error is not None:
         row.update(state=error_state(error), error=f"{type(error).__name__}: {error}",
                    converged=False, **study.failure(scene, context),
@@ -247,9 +257,13 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
     in ``out/work`` (after a change of the analysis), with the rows' :meth:`Study.progress`
     fields as they were; a point the stop rule no longer stops is dropped, so that the next
     run goes on with it from its checkpoint. Points that ended with an error, or without a
-    work directory, are kept as they are. Returns the number of points dropped."""
+    work directory, are kept as they are, with their rows of the other tables; so are the
+    rows a recomputed row does not give (:meth:`Study.final`'s). Returns the number of
+    points dropped."""
     outp = Path(out)
     keep: list[dict[str, Any]] = []
+    old_rows = {k: _rows_by_key(outp / f"{stem}.parquet", cls) for k, stem in
+                study.tables.items()}
     extra: dict[str, list[dict[str, Any]]] = {k: [] for k in study.tables}
     dropped = 0
     for old in pl.read_parquet(outp / "points.parquet").iter_rows(named=True):
@@ -257,6 +271,8 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
         d = outp / "work" / point.key
         if not (d / "meta.json").exists() or old["state"] in ("runaway", "failed"):
             keep.append(old)
+            for k in study.tables:
+                extra[k] += old_rows[k].get(point.key, [])
             continue
         info = json.loads((d / "meta.json").read_text())
         row = {**old, **study.row(point, plan, _read_tables(d), _context(info, d))}
@@ -267,12 +283,50 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
             dropped += 1
             continue
         for k in study.tables:
-            extra[k] += row.pop(k)
+            extra[k] += row.pop(k) if k in row else old_rows[k].get(point.key, [])
         keep.append(row)
     write_rows(outp / "points.parquet", keep, point=cls)
     for k, stem in study.tables.items():
         write_rows(outp / f"{stem}.parquet", extra[k], point=cls)
     return dropped
+
+
+def _rows_by_key(f: Path, cls: type) -> dict[str, list[dict[str, Any]]]:
+    """The rows of table ``f`` per point key (none if there is no ``f``)."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    if f.exists():
+        for r in pl.read_parquet(f).iter_rows(named=True):
+            out.setdefault(point_of(cls, r).key, []).append(r)
+    return out
+
+
+def add_final_rows(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -> int:
+    """Give the finished points of ``out`` that lack them the rows of :meth:`Study.final`,
+    measured on the last state kept in their work directory (points finished before the
+    study measured them; one without a checkpoint stays without). Returns how many points
+    gained rows."""
+    outp = Path(out)
+    f = outp / "points.parquet"
+    if not f.exists():
+        return 0
+    have: dict[str, set[str]] = {k: set(_rows_by_key(outp / f"{stem}.parquet", cls))
+                                 for k, stem in study.tables.items()}
+    added = 0
+    for old in pl.read_parquet(f).iter_rows(named=True):
+        point = point_of(cls, old)
+        ck = outp / "work" / point.key / "checkpoint.gfck"
+        if old["state"] in ("runaway", "failed") or not ck.exists():
+            continue
+        missing = [k for k in study.final_tables if point.key not in have[k]]
+        if not missing:
+            continue
+        scene = study.scene(point, plan, 1)
+        scene.restore(ck)
+        rows = study.final(point, scene)
+        for k in missing:
+            write_rows(outp / f"{study.tables[k]}.parquet", rows[k], append=True, point=cls)
+        added += 1
+    return added
 
 
 def _context(info: Mapping[str, Any], d: Path) -> dict[str, Any]:
