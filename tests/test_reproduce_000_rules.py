@@ -300,9 +300,18 @@ def test_the_depth_check_is_its_own_table_and_stays_out_of_the_width_analyses():
 
 
 def _row(lines: list[str], w: str) -> list[float]:
+    """runs, core-hours least and cap, longest run of a width's row (its rate: _rate)."""
     row = next(ln for ln in "\n".join(lines).splitlines()
                if ln.startswith(f"| {w} | 1e+05 | 10 |"))
-    return [float(c) for c in row.strip("|").split("|")[3:]]
+    cells = row.strip("|").split("|")
+    return [float(c) for c in (cells[3], *cells[6:])]
+
+
+def _rate(lines: list[str], w: str) -> tuple[float, str]:
+    row = next(ln for ln in "\n".join(lines).splitlines()
+               if ln.startswith(f"| {w} | 1e+05 | 10 |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    return float(cells[4]), cells[5]
 
 
 def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_path):
@@ -311,7 +320,8 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
     plan = rp.widths_plan()
     fresh = remaining(tmp_path, plan, 4e6)
     n = len(plan.points) + len(plan.branches)
-    assert f"{n} runs of the widths plan, at 4e+06 particle-steps" in "\n".join(fresh)
+    assert f"{n} runs of the widths plan" in "\n".join(fresh)
+    assert _rate(fresh, "150") == (4e6, "W = 150 stints")
     runs, least, cap, longest = _row(fresh, "150")
     assert runs == 3 and 0 < least < cap and longest < cap
     # each W = 150 run is 33,770 spheres (phi_bar 0.60) for t >= 1000 at dt 3.79e-4
@@ -326,6 +336,39 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
     assert least2 == pytest.approx(least * (0.59 + 0.61) / 1.8, abs=0.1)
     assert cap - cap2 == pytest.approx(least - least2, abs=0.15)
     assert remaining(tmp_path, rp.Plan("none", ()), 4e6) == []
+
+
+def test_runs_left_are_costed_at_their_widths_measured_rate_or_a_wider_ones(tmp_path):
+    from granflow.studies.reproduce_000_report import _particles, remaining
+
+    plan = rp.widths_plan()
+    done = next(p for p in plan.points if p.W == 20 and p.phi_bar == 0.6 and p.seed == 1)
+    # a finished W = 20 point: 4503 spheres x 1e6 steps in 500 core-s, 100 of its 600 wall
+    # seconds the preparation: 4503e6 / (500 x 5/6) particle-steps per core-second
+    row = {**{k: getattr(done, k) for k in ("W", "phi_bar", "seed", "kn", "B", "H", "parent",
+                                             "prep")},
+           "state": "steady", "n": 4503, "steps": 1_000_000, "wall_seconds": 600.0,
+           "prep_seconds": 100.0, "cpu_seconds": 500.0}
+    pl.DataFrame([row]).write_parquet(tmp_path / "points.parquet")
+    lines = remaining(tmp_path, plan, 4e6)
+    r20 = 4503e6 / (500 * 5 / 6)
+    assert _rate(lines, "20")[0] == pytest.approx(r20, rel=1e-3)
+    assert _rate(lines, "20")[1] == "W = 20"
+    # wider, unmeasured widths: the default (a narrower channel's rate bounds nothing)
+    assert _rate(lines, "40") == (4e6, "W = 150 stints")
+    # a W = 60 point measured: W = 40 is costed at it (the nearest wider), W = 100 is not
+    w60 = {**row, "W": 60.0, "n": 13508, "cpu_seconds": 2000.0}
+    pl.DataFrame([row, w60]).write_parquet(tmp_path / "points.parquet")
+    lines = remaining(tmp_path, plan, 4e6)
+    r60 = 13508e6 / (2000 * 5 / 6)
+    assert _rate(lines, "40")[0] == pytest.approx(r60, rel=1e-3)
+    assert _rate(lines, "40")[1] == "W = 60"
+    assert _rate(lines, "100") == (4e6, "W = 150 stints")
+    # the W = 20 rows' hours at the W = 20 rate: 8 runs left, from t = 0 to 2600 at most
+    runs, _, cap, _ = _row(lines, "20")
+    assert runs == 8 and cap == pytest.approx(
+        sum(_particles(p) / p.dt * 2600 / r20 / 3600 for p in plan.points
+            if p.W == 20 and p.key != done.key), rel=0.01)
 
 
 def test_runs_still_to_do_and_the_paper_scale_are_costed_at_the_slower_rate():

@@ -28,7 +28,15 @@ from granflow.analysis.rheology import pool_realizations
 from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
-from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, plot_campaign_se, pm
+from ._campaign import (
+    core_seconds,
+    cost,
+    dask_recipe,
+    md_table,
+    paper_scale_estimate,
+    plot_campaign_se,
+    pm,
+)
 from .reproduce_000_report_order import order_lines
 
 #: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
@@ -925,11 +933,43 @@ def planning_rate(rate: float | None) -> tuple[float, str]:
     return r, source
 
 
-def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
+def width_rates(points: pl.DataFrame) -> dict[tuple[float, float], float]:
+    """The throughput (particle-steps per core-second, the runs only: a point's core-seconds
+    less the preparation's share of its wall time, as :func:`cost`) measured on the finished
+    points of ``points`` per (W, k_n)."""
+    need = {"n", "steps", "wall_seconds", "prep_seconds"}
+    if not points.height or not need <= set(points.columns):
+        return {}
+    d = points.filter(pl.col("steps") > 0).with_columns(
+        (pl.col("n") * pl.col("steps")).alias("ps"),
+        (core_seconds(points) * (1.0 - pl.col("prep_seconds").fill_nan(0.0)
+                                 / pl.col("wall_seconds"))).alias("run_s"))
+    per = d.group_by("W", "kn").agg((pl.col("ps").sum() / pl.col("run_s").sum()).alias("r"))
+    return {(float(w), float(k)): float(r) for w, k, r in per.iter_rows()
+            if math.isfinite(r) and r > 0}
+
+
+def rate_at(w: float, kn: float, rates: Mapping[tuple[float, float], float],
+            default: float = UNMEASURED_RATE) -> tuple[float, str]:
+    """The throughput a run at width ``w`` and ``kn`` is costed at, and where it comes from:
+    ``rates`` measured at that width, else at the nearest wider width measured (a wider
+    channel steps slower per particle: benchmarks/NOTES.md, so that bounds it), else
+    ``default``."""
+    if (w, kn) in rates:
+        return rates[(w, kn)], f"W = {w:g}"
+    wider = sorted(x for x, k in rates if k == kn and x > w)
+    if wider:
+        return rates[(wider[0], kn)], f"W = {wider[0]:g}"
+    return default, "W = 150 stints"
+
+
+def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[str]:
     """The plan's runs not yet in ``out``, per (W, k_n, B): how many, and their core-hours at
-    ``planning_rate(rate)``, from the least each must run (t_min, or the minimum average) to
-    its cap (t_max), less what a started run has done (its series in ``out/work``); the
-    longest run's hours on one core; the recipe. Report lines; none when the plan is done."""
+    the throughput measured on ``out``'s finished points at that width (:func:`rate_at`;
+    ``default`` where none bounds it), from the least each must run (t_min, or the minimum
+    average) to its cap (t_max), less what a started run has done (its series in
+    ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
+    the plan is done."""
     from ._campaign import done_keys
 
     planned = (*plan.points, *plan.branches, *plan.later)
@@ -940,15 +980,17 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
     left = [p for p in planned if p.key not in done]
     if not left:
         return []
-    r, source = planning_rate(rate)
+    rates = width_rates(_read(out, "points"))
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
     for p in left:
         t_cap, t_avg = plan.limits(p)
         series = out / "work" / p.key / "series.parquet"
         t_done = (float(pl.read_parquet(series, columns=["t"])["t"].max())  # type: ignore[arg-type]
                   if series.exists() and not p.parent else 0.0)
+        r, source = rate_at(p.W, p.kn, rates, default)
         per_t = _particles(p) / p.dt / r / 3600  # core-hours per unit of time
         row = rows.setdefault((p.W, p.kn, p.B), {"W": p.W, "k_n": p.kn, "B": p.B, "runs": 0,
+                                                 "rate": r, "rate from": source,
                                                  "core-hours (least)": 0.0,
                                                  "core-hours (cap)": 0.0,
                                                  "longest run (h, 1 core)": 0.0})
@@ -965,13 +1007,17 @@ def remaining(out: Path, plan: Any, rate: float | None) -> list[str]:
             *([f"The {after} campaign carries this one's question on: the runs below are "
                "what this plan would still run, for its own protocol only.", ""] if after
               else []),
-            f"{len(left)} runs of the {plan.name} plan, at {r:.3g} particle-steps per "
-            f"core-second ({source})"
-            + ": each from the least it must run (a branch its minimum average; the others "
-            f"t_min or the minimum average) to its cap (t = {plan.t_max:g}), less what a "
-            "started run has done:", "",
-            md_table(tab, {"W": ".0f", "k_n": ".0e", "B": ".0f", "core-hours (least)": ".1f",
-                           "core-hours (cap)": ".1f", "longest run (h, 1 core)": ".1f"}), "",
+            f"{len(left)} runs of the {plan.name} plan, each from the least it must run (a "
+            "branch its minimum average; the others t_min or the minimum average) to its cap "
+            f"(t = {plan.t_max:g}), less what a started run has done, at the throughput "
+            "(`rate`, particle-steps per core-second) measured on this dataset's finished "
+            "points at that width and k_n, else at the nearest wider width measured (a wider "
+            "channel steps slower per particle), else "
+            f"{default:.3g} (`W = 150 stints`: the W = 150 run's stints, "
+            "benchmarks/NOTES.md):", "",
+            md_table(tab, {"W": ".0f", "k_n": ".0e", "B": ".0f", "rate": ".3g",
+                           "core-hours (least)": ".1f", "core-hours (cap)": ".1f",
+                           "longest run (h, 1 core)": ".1f"}), "",
             f"About {lo:.0f}-{hi:.0f} core-hours: {lo / 6:.0f}-{hi / 6:.0f} sessions of 3 h "
             "on this 2-core machine. On a cluster each point is one task of one "
             f"thread (it checkpoints every stint and resumes from there); the longest takes "
@@ -1307,7 +1353,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
         path.write_text(f"# Reproducing 000 ({plan.name} campaign)\n\nNo finished point yet "
                         f"in {out}: {n} planned. Run `python -m granflow.studies.reproduce_000 "
                         f"--{plan.name} --out {out} --report {path}`; it resumes from what is "
-                        "there.\n\n" + "\n".join(remaining(out, plan, None)))
+                        "there.\n\n" + "\n".join(remaining(out, plan)))
         return path
     se = _read(out, "se_vs_time")
     # the 10-block rule, applied to the dataset as the analysis now applies it
@@ -1340,11 +1386,9 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
         figs += f
     lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(path.parent)})"
                                    for p in figs] + [""]
-    rate = None
     if points.height and points["steps"].sum():
-        text, rate = _cost_section(points, paper)
-        lines += text
-    lines += remaining(out, plan, rate)
+        lines += _cost_section(points, paper)[0]
+    lines += remaining(out, plan)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
