@@ -670,8 +670,12 @@ def stop_rule(plan: Any) -> str:
     for p in plan.points:
         key = tuple(getattr(p, c) for c in POINT_BY)
         seeds[key] = seeds.get(key, 0) + 1
-    k = min(seeds.values()) if seeds else 0
-    return (f"Each point runs with {k} seed{'s' if k != 1 else ''}, in stints of "
+    k = max(seeds.values()) if seeds else 0
+    fewer = sorted({(key[0], key[3]) for key, n in seeds.items() if n < k}, reverse=True)
+    # (POINT_BY's W and B: the wide runs and the depth check's, where one seed is planned)
+    short = (" (one at " + ", ".join(f"W = {w:g}" + (f", B = {b:g}" if b != 10 else "")
+                                     for w, b in fewer) + ")") if fewer else ""
+    return (f"Each point runs with {k} seed{'s' if k != 1 else ''}{short}, in stints of "
             f"{plan.stint:g} √(d/g). It stops when it is steady (the last half of |v_cm| "
             "steady or fluctuating by granflow.analysis.channel_profiles.flow_state), "
             "stationary (the thirds test of u_slip, u_max, the mean velocity and the mean σxx "
@@ -1260,8 +1264,11 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     out = ["## Findings", ""]
     flow = points.filter(pl.col("parent") == "")
     for (w,), g in flow.sort("phi_bar", "seed").group_by(["W"], maintain_order=True):
-        states = ", ".join(f"{p:g}: {s}" for p, s in zip(g["phi_bar"], g["state"],
-                                                          strict=True))
+        states = "; ".join(
+            f"φ̄ {p:g}: " + ", ".join(f"{s}{f' x{n}' if n > 1 else ''}"
+                                    for s, n in h.group_by("state", maintain_order=True)
+                                    .len().iter_rows())
+            for (p,), h in g.group_by(["phi_bar"], maintain_order=True))
         out.append(f"- W = {w:g}: {states} (000, W = 60-150: steady for φ̄ = 0.59-0.61, "
                    "fluctuating at 0.62, jammed above).")
     ratios = ratio_by_width(steady) if steady.height else pl.DataFrame()
