@@ -441,3 +441,18 @@ def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():
     text = "\n".join(order_lines(order(0.9), prof, values))
     assert "2 of 2 runs have an ordered plug" in text and "seed 1: 90.0%" in text
     assert order_lines(order(0.0).head(0), prof, values) == []
+
+
+def test_the_coverage_audit_says_which_run_ses_are_too_small():
+    from granflow.studies.reproduce_000_report import coverage_verdicts
+
+    tab = pl.DataFrame({"observable": ["u_slip", "phi_plug", "sigma_xx_mean", "wall_friction",
+                                       "delta_095"],
+                        "pairs": [3, 3, 3, 3, 0], "rms_z": [2.9, 4.3, 0.8, 0.2, None],
+                        "rms_z_lo": [1.5, 2.2, 0.4, 0.1, None],
+                        "rms_z_hi": [18.0, 27.0, 4.9, 0.9, None]})
+    text = "\n".join(coverage_verdicts(tab))
+    assert "**The run SEs are too small** for u_slip (2.90), phi_plug (4.30):" in text
+    assert "too large for wall_friction (0.20)." in text
+    assert "honest SEs (rms z within its 95 % interval of 1): sigma_xx_mean (0.80)." in text
+    assert "delta_095" not in text

@@ -59,6 +59,8 @@ MARKERS = {0.59: "D", 0.6: "v", 0.61: "^", 0.62: "o"}
 #: point over its replicas and the coverage audit
 REPORTED = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "mean_velocity_ratio",
             "wall_friction", "sigma_xx_mean")
+#: audited across replicas beside REPORTED (the plug's packing, set by each run's preparation)
+AUDITED = ("phi_plug",)
 #: a point's fields less the seed (and the parent key, which names its parent's seed): the
 #: replicas of a point share them
 POINT_BY = ("W", "phi_bar", "kn", "B", "H")
@@ -891,8 +893,34 @@ def coverage_table(points: pl.DataFrame) -> pl.DataFrame:
     """The coverage audit (granflow.analysis.coverage.coverage) of the reported quantities
     over the steady replicas of ``points``, grouped by the point's fields less the seed
     (POINT_BY; the parent key names its parent's seed, so it is left out)."""
-    obs = [c for c in REPORTED if c in points.columns]
+    obs = [c for c in (*REPORTED, *AUDITED) if c in points.columns]
     return coverage(steady_rows(points), POINT_BY, obs)
+
+
+def coverage_verdicts(tab: pl.DataFrame) -> list[str]:
+    """What the audit ``tab`` (:func:`coverage_table`) says of each observable with pairs:
+    its run SEs too small (the 95 % interval of rms z above 1), too large (below 1), or
+    consistent with honest ones."""
+    small: list[str] = []
+    large: list[str] = []
+    fine: list[str] = []
+    for r in tab.filter(pl.col("pairs") > 0).iter_rows(named=True):
+        label = f"{r['observable']} ({r['rms_z']:.2f})"
+        (small if r["rms_z_lo"] > 1 else large if r["rms_z_hi"] < 1 else fine).append(label)
+    out = []
+    if small:
+        out.append("**The run SEs are too small** for " + ", ".join(small) + ": the "
+                   "replicas differ by more than their SEs allow: a mode slower than the runs, "
+                   "or each run's own preparation (φ plug, which no shear rearranges once the "
+                   "plug has formed, is among them). The points' SEs above are the larger of "
+                   "the within-run and between-replica ones, so there they rest on the "
+                   "replicas' spread.")
+    if large:
+        out.append("The run SEs are too large for " + ", ".join(large) + ".")
+    if fine:
+        out.append("Consistent with honest SEs (rms z within its 95 % interval of 1): "
+                   + ", ".join(fine) + ".")
+    return out
 
 
 def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
@@ -908,6 +936,7 @@ def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
              f"{MIN_SE_BLOCKS}-block rule to the dataset first).", "",
              md_table(tab, {"rms_z": ".2f", "rms_z_lo": ".2f", "rms_z_hi": ".2f",
                             "max_abs_z": ".1f"}), ""]
+    lines += [x for v in coverage_verdicts(tab) for x in (v, "")] if tab.height else []
     pairs = int(tab["pairs"].sum()) if tab.height else 0
     if pairs == 0:
         k = int(per.to_numpy().max()) if per is not None and per.len() else 0
