@@ -456,3 +456,17 @@ def test_the_coverage_audit_says_which_run_ses_are_too_small():
     assert "too large for wall_friction (0.20)." in text
     assert "honest SEs (rms z within its 95 % interval of 1): sigma_xx_mean (0.80)." in text
     assert "delta_095" not in text
+
+
+def test_unconverged_ses_are_blamed_on_the_rule_only_where_the_runs_predate_it(tmp_path):
+    from granflow.studies.reproduce_000_report import _se_section
+
+    run = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "seed": 1}
+    # the quarter's SE as large as the whole part's: not converged (T^-1/2 gives 2)
+    se = pl.DataFrame([{**run, "fraction": f, "u_slip_se": 0.1, "u_max_se": 0.1,
+                        "n_blocks": 10 + int(20 * f)} for f in (0.25, 0.5, 1.0)])
+    old = "\n".join(_se_section(se, tmp_path)[0])
+    new = "\n".join(_se_section(se, tmp_path, ruled=True)[0])
+    assert "had not converged" in old and "this dataset predates them" in old
+    assert "had not converged" in new and "predates" not in new
+    assert "coverage audit below" in new
