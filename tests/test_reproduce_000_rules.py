@@ -463,7 +463,8 @@ def test_unconverged_ses_are_blamed_on_the_rule_only_where_the_runs_predate_it(t
 
     run = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "seed": 1}
     # the quarter's SE as large as the whole part's: not converged (T^-1/2 gives 2)
-    se = pl.DataFrame([{**run, "fraction": f, "u_slip_se": 0.1, "u_max_se": 0.1,
+    se = pl.DataFrame([{**run, "fraction": f, "T_avg": 400 * f, "u_slip": 7.0, "u_max": 9.0,
+                        "u_slip_se": 0.1, "u_max_se": 0.1,
                         "n_blocks": 10 + int(20 * f)} for f in (0.25, 0.5, 1.0)])
     old = "\n".join(_se_section(se, tmp_path)[0])
     new = "\n".join(_se_section(se, tmp_path, ruled=True)[0])
