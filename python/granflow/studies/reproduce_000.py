@@ -395,7 +395,7 @@ class ChannelStudy(Study):
         return point_row(point, plan, tables["bins"], tables["series"], n)
 
     def final(self, point: Point, scene: Any) -> dict[str, list[dict[str, Any]]]:
-        # (the plug's order, issue 36: a snapshot of the last state)
+        # (the plug's order parameter: a snapshot of the last state)
         return {"order_rows": order_rows(point, scene)}
 
     def stop(self, row: Mapping[str, Any], point: Point, plan: Plan,

@@ -1,4 +1,4 @@
-"""The 000 report's section on the plug's order (issue 36): is the unsheared centre, packed
+"""The 000 report's section on the plug's order: is the unsheared centre, packed
 above 000's ~0.63 in narrow channels, a crystal against the flat walls or a dense amorphous
 packing? From each steady run's last state (the campaign's ``order.parquet``,
 granflow.studies.reproduce_000.order_rows: Steinhardt Q6 and the ten Wolde crystal-like
