@@ -674,8 +674,11 @@ def stop_rule(plan: Any) -> str:
         seeds[key] = seeds.get(key, 0) + 1
     k = max(seeds.values()) if seeds else 0
     fewer = sorted({(key[0], key[3]) for key, n in seeds.items() if n < k}, reverse=True)
-    # (POINT_BY's W and B: the wide runs and the depth check's, where one seed is planned)
-    short = (" (one at " + ", ".join(f"W = {w:g}" + (f", B = {b:g}" if b != 10 else "")
+    # (POINT_BY's W and B: the wide runs and the depth check's, where one seed is planned;
+    # B named where it is not the plan's main depth)
+    depths = [p.B for p in plan.points]
+    main_b = max(set(depths), key=depths.count) if depths else math.nan
+    short = (" (one at " + ", ".join(f"W = {w:g}" + (f", B = {b:g}" if b != main_b else "")
                                      for w, b in fewer) + ")") if fewer else ""
     return (f"Each point runs with {k} seed{'s' if k != 1 else ''}{short}, in stints of "
             f"{plan.stint:g} √(d/g). It stops when it is steady (the last half of |v_cm| "
