@@ -471,3 +471,41 @@ def test_unconverged_ses_are_blamed_on_the_rule_only_where_the_runs_predate_it(t
     assert "had not converged" in old and "this dataset predates them" in old
     assert "had not converged" in new and "predates" not in new
     assert "coverage audit below" in new
+
+
+def test_the_creep_of_a_steady_part_is_its_relative_trend_per_1000_time_units():
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 1500.0, 0.5)
+    noise = rng.normal(0.0, 0.2, t.size)
+    # |v_cm| rising 5 % per 1000 time units from t = 500, flat before (the transient)
+    v = 10.0 * (1 + 0.05 * np.clip(t - 500.0, 0, None) / 1000) + noise
+    ser = pa.table({"t": t, "vcm_y": -v})
+    c = rp.creep_row(ser, 500.0)
+    mean = float(v[t >= 500].mean())
+    # (slope 10 x 0.05 / 1000 per time unit: 0.5 per 1000, relative to the mean)
+    assert c["creep"] == pytest.approx(0.5 / mean, rel=0.1)
+    assert c["creep_z"] > 10
+    flat = rp.creep_row(pa.table({"t": t, "vcm_y": -(10.0 + noise)}), 500.0)
+    assert abs(flat["creep_z"]) < 4 and abs(flat["creep"]) < 0.01
+
+
+def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points():
+    from granflow.studies.reproduce_000_report import creep_lines, creep_table
+
+    base = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "",
+            "state": "steady", "converged": True, "t_start": 500.0, "t_end": 1500.0}
+    rows = [{**base, "seed": s, "creep": c, "creep_se": se, "creep_z": c / se}
+            for s, c, se in ((1, 0.04, 0.01), (2, 0.07, 0.03), (3, 0.06, 0.02))]
+    rows += [{**base, "W": 40.0, "seed": s, "creep": c, "creep_se": 0.02,
+              "creep_z": c / 0.02} for s, c in ((1, 0.01), (2, -0.01))]
+    tab = creep_table(pl.DataFrame(rows))
+    w = np.array([1e4, 1 / 9e-4, 2.5e3])
+    want = float((w * [0.04, 0.07, 0.06]).sum() / w.sum())
+    r20 = tab.filter(pl.col("W") == 20).row(0, named=True)
+    assert r20["creep per 1000 t"] == pytest.approx(want)
+    assert r20["SE"] == pytest.approx(w.sum() ** -0.5) and r20["replicas"] == 3
+    assert tab.filter(pl.col("W") == 40)["creep per 1000 t"][0] == pytest.approx(0.0)
+    text = "\n".join(creep_lines(pl.DataFrame(rows)))
+    assert "**1 of 2 points creep**" in text and f"W = 20, φ̄ = 0.6: {want:+.1%} per 1000" in text
+    assert creep_lines(pl.DataFrame([{k: v for k, v in r.items() if "creep" not in k}
+                                     for r in rows])) == []

@@ -304,10 +304,31 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table,
     chk = ach.steady_check(prof)
     row.update(drift_z=chk.stationarity.max_abs_z, drift_quantity=chk.stationarity.worst,
                drift_tested=chk.stationarity.tested, tau_max=chk.tau_max)
+    row.update(creep_row(series, prof.t_start))
     if chk.drifting:
         row["state"] = FlowState.DRIFTING.value
     row["converged"] = converged(row, plan, point)
     return row
+
+
+#: the creep's time unit: its slope is the relative change of |v_cm| per this many sqrt(d/g)
+CREEP_PER = 1000.0
+
+
+def creep_row(series: pa.Table, t_start: float) -> dict[str, Any]:
+    """The straight-line trend of |v_cm| over the steady part (from ``t_start``) as the
+    relative change per CREEP_PER time units, with its SE corrected for serial correlation
+    (granflow.analysis.stats.steady.trend): ``creep``, ``creep_se``, ``creep_z``. Reported,
+    not part of the stop rule: a slow creep within the thirds test's errors still biases a
+    replica by where it stops (the report pools it over replicas)."""
+    from granflow.analysis.stats.steady import trend
+
+    t = np.asarray(series.column("t").to_numpy(), dtype=float)
+    v = np.abs(np.asarray(series.column("vcm_y").to_numpy(), dtype=float))
+    keep = t >= t_start
+    tr = trend(t[keep], v[keep])
+    scale = CREEP_PER / abs(tr.mean) if tr.mean else math.nan
+    return {"creep": tr.slope * scale, "creep_se": tr.slope_se * scale, "creep_z": tr.t_stat}
 
 
 def long_enough(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
