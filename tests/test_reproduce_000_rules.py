@@ -417,6 +417,7 @@ def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path)
 
 
 def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():
+    from granflow.studies.reproduce_000_report import POINT_BY
     from granflow.studies.reproduce_000_report_order import order_lines, run_order
 
     run = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0}
@@ -432,15 +433,15 @@ def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():
                              for s in (1, 2) for x, z in zip(xi, zone, strict=True)
                              for _ in (0, 1)])
     values = pl.DataFrame([{**run, "phi_plug": 0.647, "phi_plug_se": 0.002}])
-    r = run_order(order(0.0), prof)
+    r = run_order(order(0.0), prof, POINT_BY)
     plug = r.filter(pl.col("zone") == "plug")
     assert plug.height == 2 and (plug["spheres"] == 400).all()
     assert plug["Q6_random"][0] == pytest.approx(1 / math.sqrt(4000))
-    text = "\n".join(order_lines(order(0.0), prof, values))
+    text = "\n".join(order_lines(order(0.0), prof, values, POINT_BY))
     assert "The plug is amorphous in every run" in text and "0.6470 ± 0.0020" in text
-    text = "\n".join(order_lines(order(0.9), prof, values))
+    text = "\n".join(order_lines(order(0.9), prof, values, POINT_BY))
     assert "2 of 2 runs have an ordered plug" in text and "seed 1: 90.0%" in text
-    assert order_lines(order(0.0).head(0), prof, values) == []
+    assert order_lines(order(0.0).head(0), prof, values, POINT_BY) == []
 
 
 def test_the_coverage_audit_says_which_run_ses_are_too_small():
@@ -490,7 +491,8 @@ def test_the_creep_of_a_steady_part_is_its_relative_trend_per_1000_time_units():
 
 
 def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points():
-    from granflow.studies.reproduce_000_report import creep_lines, creep_table
+    from granflow.studies.reproduce_000_report import POINT_BY
+    from granflow.studies.reproduce_000_report_creep import creep_lines, creep_table
 
     base = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "",
             "state": "steady", "converged": True, "t_start": 500.0, "t_end": 1500.0}
@@ -498,14 +500,14 @@ def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points(
             for s, c, se in ((1, 0.04, 0.01), (2, 0.07, 0.03), (3, 0.06, 0.02))]
     rows += [{**base, "W": 40.0, "seed": s, "creep": c, "creep_se": 0.02,
               "creep_z": c / 0.02} for s, c in ((1, 0.01), (2, -0.01))]
-    tab = creep_table(pl.DataFrame(rows))
+    tab = creep_table(pl.DataFrame(rows), POINT_BY)
     w = np.array([1e4, 1 / 9e-4, 2.5e3])
     want = float((w * [0.04, 0.07, 0.06]).sum() / w.sum())
     r20 = tab.filter(pl.col("W") == 20).row(0, named=True)
     assert r20["creep per 1000 t"] == pytest.approx(want)
     assert r20["SE"] == pytest.approx(w.sum() ** -0.5) and r20["replicas"] == 3
     assert tab.filter(pl.col("W") == 40)["creep per 1000 t"][0] == pytest.approx(0.0)
-    text = "\n".join(creep_lines(pl.DataFrame(rows)))
+    text = "\n".join(creep_lines(pl.DataFrame(rows), POINT_BY))
     assert "**1 of 2 points creep**" in text and f"W = 20, φ̄ = 0.6: {want:+.1%} per 1000" in text
     assert creep_lines(pl.DataFrame([{k: v for k, v in r.items() if "creep" not in k}
-                                     for r in rows])) == []
+                                     for r in rows]), POINT_BY) == []

@@ -37,6 +37,7 @@ from ._campaign import (
     plot_campaign_se,
     pm,
 )
+from .reproduce_000_report_creep import creep_lines
 from .reproduce_000_report_order import order_lines
 
 #: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
@@ -789,7 +790,7 @@ def _zones_section(steady: pl.DataFrame, profiles: pl.DataFrame, means: pl.DataF
              "SE of every steady point, pooled:", "",
              md_table(phi_ad_fits(profiles), {"χ²/dof": ".2f",
                                               "from 0.59 ± 0.002 (SEs)": "+.1f"}), "",
-             *order_lines(order, profiles, steady)]
+             *order_lines(order, profiles, steady, POINT_BY)]
     wide = steady.filter(pl.col("W") == steady["W"].max())
     w = f"W = {wide['W'][0]:g}"
     # units: lengths d, velocities √(gd), stresses ρ_p g d (granflow.analysis.channel_profiles)
@@ -933,60 +934,6 @@ def coverage_verdicts(tab: pl.DataFrame) -> list[str]:
     return out
 
 
-#: a point's pooled creep beyond this many SEs counts as creeping
-CREEP_Z = 3.0
-
-
-def creep_table(points: pl.DataFrame) -> pl.DataFrame:
-    """Per point (POINT_BY) with steady replicas that carry it (reproduce_000.creep_row): the
-    creep of |v_cm| through the steady parts, relative per 1000 time units, pooled over the
-    replicas (inverse-variance mean and SE), its z, each replica's z, and the steady parts'
-    span."""
-    st = steady_rows(points) if points.height else points
-    if not st.height or "creep" not in st.columns:
-        return pl.DataFrame()
-    st = st.filter(pl.col("creep").is_finite() & pl.col("creep_se").is_finite()
-                   & (pl.col("creep_se") > 0))
-    rows = []
-    for key, g in st.sort("seed").group_by(list(POINT_BY), maintain_order=True):
-        w = 1.0 / g["creep_se"].to_numpy() ** 2
-        c = float((w * g["creep"].to_numpy()).sum() / w.sum())
-        se = float(w.sum() ** -0.5)
-        rows.append({**dict(zip(POINT_BY, key, strict=True)), "replicas": g.height,
-                     "creep per 1000 t": c, "SE": se, "z": c / se,
-                     "replicas' z": ", ".join(f"{z:+.1f}" for z in g["creep_z"].to_list()),
-                     "steady parts": f"t = {g['t_start'].to_numpy().min():.0f}-"
-                                     f"{g['t_end'].to_numpy().max():.0f}"})
-    return pl.DataFrame(rows).sort(list(POINT_BY)) if rows else pl.DataFrame()
-
-
-def creep_lines(points: pl.DataFrame) -> list[str]:
-    """The creep table (:func:`creep_table`) and what it says; none without the fields."""
-    tab = creep_table(points)
-    if not tab.height:
-        return []
-    creeping = tab.filter(pl.col("z").abs() > CREEP_Z)
-    lines = ["### Creep within the steady parts", "",
-             "The straight-line trend of |v_cm| through each steady part (its SE corrected for "
-             "serial correlation, granflow.analysis.stats.steady.trend), relative per 1000 "
-             "time units, pooled over a point's replicas (inverse-variance). It is not part of "
-             "the stop rule: the thirds test judges each run alone, and a creep within its "
-             "errors still moves a replica's means by where the run stopped.", "",
-             md_table(tab.drop("kn", "B", "H"), {"creep per 1000 t": "+.4f", "SE": ".4f",
-                                                  "z": "+.1f"}), ""]
-    if creeping.height:
-        lines += [f"**{creeping.height} of {tab.height} points creep** (pooled |z| > "
-                  f"{CREEP_Z:g}): "
-                  + "; ".join(f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}: "
-                              f"{r['creep per 1000 t']:+.1%} per 1000 time units (z "
-                              f"{r['z']:+.1f})" for r in creeping.iter_rows(named=True))
-                  + ". These flows were still changing when they stopped (+: speeding up): "
-                  "000 develops its flows for 2000 time units before it averages; "
-                  "the replicas' spread in the audit above is in part where each one stopped.",
-                  ""]
-    return lines
-
-
 def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
     tab = coverage_table(points)
     per = steady_rows(points).group_by(list(POINT_BY)).len()["len"] if points.height else None
@@ -1001,7 +948,7 @@ def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
              md_table(tab, {"rms_z": ".2f", "rms_z_lo": ".2f", "rms_z_hi": ".2f",
                             "max_abs_z": ".1f"}), ""]
     lines += [x for v in coverage_verdicts(tab) for x in (v, "")] if tab.height else []
-    lines += creep_lines(points)
+    lines += creep_lines(points, POINT_BY)
     pairs = int(tab["pairs"].sum()) if tab.height else 0
     if pairs == 0:
         k = int(per.to_numpy().max()) if per is not None and per.len() else 0

@@ -7,54 +7,54 @@ fraction per bin, granflow.analysis.order), over the bins of the run's plug and 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import polars as pl
 
 from granflow.analysis.order import CUTOFF
 
 from ._campaign import md_table
 
-#: a run's fields (the point's and its seed): its rows of the order and profiles tables
-RUN = ("W", "phi_bar", "kn", "B", "H", "seed")
-#: a point's fields (its replicas share them)
-POINT = ("W", "phi_bar", "kn", "B", "H")
 #: crystal-like fraction above which a region counts as ordered (a crystal nucleus spans a
 #: few percent of a random packing's spheres at most: granflow.analysis.order's tests)
 ORDERED = 0.05
 
 
-def run_order(order: pl.DataFrame, profiles: pl.DataFrame) -> pl.DataFrame:
+def run_order(order: pl.DataFrame, profiles: pl.DataFrame, by: Sequence[str]
+              ) -> pl.DataFrame:
     """Per run of ``order`` (its last state's bins across the channel) and zone ("plug" and
     "wall", by the run's half profile in ``profiles``, both halves of the channel): Q6
     averaged over the zone's bond ends, and the crystal-like fraction and coordination Z
     over its spheres; ``Q6_random``, 1/sqrt(bond ends), what a random packing of as many bonds
-    gives. Empty where either table is."""
+    gives. A run: a point's fields ``by`` and its seed. Empty where either table is."""
     if not order.height or not profiles.height:
         return pl.DataFrame()
+    run = [*by, "seed"]
     # (a bin of the whole width sits at xi = min(x, W - x) of the half profile's bins)
     o = order.with_columns(pl.col("xi").round(6).alias("_xi"))
-    z = profiles.select(*RUN, pl.col("xi").round(6).alias("_xi"), "zone")
-    d = o.join(z, on=[*RUN, "_xi"], how="inner").filter(pl.col("zone").is_in(["plug", "wall"]))
-    return d.group_by([*RUN, "zone"], maintain_order=True).agg(
+    z = profiles.select(*run, pl.col("xi").round(6).alias("_xi"), "zone")
+    d = o.join(z, on=[*run, "_xi"], how="inner").filter(pl.col("zone").is_in(["plug", "wall"]))
+    return d.group_by([*run, "zone"], maintain_order=True).agg(
         ((pl.col("Q6") * pl.col("bonds")).sum() / pl.col("bonds").sum()).alias("Q6"),
         ((pl.col("crystal_fraction") * pl.col("particles")).sum()
          / pl.col("particles").sum()).alias("crystal_fraction"),
         (pl.col("bonds").sum() / pl.col("particles").sum()).alias("Z"),
         pl.col("particles").sum().alias("spheres"),
         (1.0 / pl.col("bonds").sum().sqrt()).alias("Q6_random"),
-        pl.col("t").first().alias("t")).sort([*RUN, "zone"])
+        pl.col("t").first().alias("t")).sort([*run, "zone"])
 
 
-def order_table(runs: pl.DataFrame, values: pl.DataFrame) -> pl.DataFrame:
+def order_table(runs: pl.DataFrame, values: pl.DataFrame, by: Sequence[str]) -> pl.DataFrame:
     """Per point: the plug's and the wall bin's Q6 and crystal-like fraction over its
     replicas (mean, and the range where there are several) beside the point's φ plug
-    (``values``: the replica means of the report)."""
+    (``values``: the replica means of the report; a point: its fields ``by``)."""
     if not runs.height:
         return pl.DataFrame()
-    wide = runs.pivot(on="zone", index=list(RUN),
+    wide = runs.pivot(on="zone", index=[*by, "seed"],
                       values=["Q6", "Q6_random", "crystal_fraction"])
     rows = []
-    for key, g in wide.group_by(list(POINT), maintain_order=True):
-        row = dict(zip(POINT, key, strict=True))
+    for key, g in wide.group_by(list(by), maintain_order=True):
+        row = dict(zip(by, key, strict=True))
         out = {"W": row["W"], "φ̄": row["phi_bar"], "replicas": g.height}
         for col, label in (("Q6_plug", "Q6 plug"), ("Q6_random_plug", "random Q6 plug"),
                            ("crystal_fraction_plug", "crystal plug"),
@@ -64,20 +64,21 @@ def order_table(runs: pl.DataFrame, values: pl.DataFrame) -> pl.DataFrame:
                  ).to_numpy()
             out[label] = (f"{x.mean():.3f}" + (f" ({x.min():.3f}-{x.max():.3f})"
                                                if x.size > 1 else "")) if x.size else "-"
-        v = values.filter(*(pl.col(c) == row[c] for c in POINT))
+        v = values.filter(*(pl.col(c) == row[c] for c in by))
         out["φ plug"] = (f"{v['phi_plug'][0]:.4f} ± {v['phi_plug_se'][0]:.4f}"
                          if v.height and v["phi_plug"][0] is not None else "-")
         rows.append(out)
     return pl.DataFrame(rows).sort("W", "φ̄")
 
 
-def order_lines(order: pl.DataFrame, profiles: pl.DataFrame, values: pl.DataFrame
-                ) -> list[str]:
-    """The section's lines; none where no steady run has its order measured."""
-    runs = run_order(order, profiles)
+def order_lines(order: pl.DataFrame, profiles: pl.DataFrame, values: pl.DataFrame,
+                by: Sequence[str]) -> list[str]:
+    """The section's lines (a point: its fields ``by``); none where no steady run has its
+    order measured."""
+    runs = run_order(order, profiles, by)
     if not runs.height:
         return []
-    tab = order_table(runs, values)
+    tab = order_table(runs, values, by)
     plug = runs.filter(pl.col("zone") == "plug")
     ordered = plug.filter(pl.col("crystal_fraction") > ORDERED)
     lines = ["### The plug's order", "",
