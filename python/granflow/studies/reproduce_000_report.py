@@ -29,13 +29,13 @@ from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
 from ._campaign import (
-    core_seconds,
     cost,
     dask_recipe,
     md_table,
     paper_scale_estimate,
     plot_campaign_se,
     pm,
+    run_seconds,
 )
 from .reproduce_000_report_creep import creep_lines
 from .reproduce_000_report_order import order_lines
@@ -979,16 +979,15 @@ def planning_rate(rate: float | None) -> tuple[float, str]:
 
 
 def width_rates(points: pl.DataFrame) -> dict[tuple[float, float], float]:
-    """The throughput (particle-steps per core-second, the runs only: a point's core-seconds
-    less the preparation's share of its wall time, as :func:`cost`) measured on the finished
+    """The throughput (particle-steps per core-second of the runs only, _campaign.run_seconds,
+    as :func:`cost`) measured on the finished
     points of ``points`` per (W, k_n)."""
     need = {"n", "steps", "wall_seconds", "prep_seconds"}
     if not points.height or not need <= set(points.columns):
         return {}
     d = points.filter(pl.col("steps") > 0).with_columns(
         (pl.col("n") * pl.col("steps")).alias("ps"),
-        (core_seconds(points) * (1.0 - pl.col("prep_seconds").fill_nan(0.0)
-                                 / pl.col("wall_seconds"))).alias("run_s"))
+        run_seconds(points, "prep_seconds").alias("run_s"))
     per = d.group_by("W", "kn").agg((pl.col("ps").sum() / pl.col("run_s").sum()).alias("r"))
     return {(float(w), float(k)): float(r) for w, k, r in per.iter_rows()
             if math.isfinite(r) and r > 0}

@@ -120,6 +120,13 @@ def core_seconds(points: pl.DataFrame) -> pl.Expr:
     return pl.when(cpu.is_not_null() & cpu.is_finite() & (cpu > 0)).then(cpu).otherwise(wall)
 
 
+def run_seconds(points: pl.DataFrame, prep: str | None = None) -> pl.Expr:
+    """Each point's core-seconds (:func:`core_seconds`) of its run only when ``prep`` names
+    the preparation's (wall) seconds: less the preparation's share of its wall time."""
+    cs = core_seconds(points)
+    return cs * (1.0 - pl.col(prep).fill_nan(0.0) / pl.col("wall_seconds")) if prep else cs
+
+
 def cost(points: pl.DataFrame, by: Sequence[str], particles: str, steps: str, *,
          columns: Sequence[pl.Expr] = (), sort: Sequence[str] | None = None,
          prep: str | None = None) -> tuple[pl.DataFrame, float]:
@@ -134,8 +141,7 @@ def cost(points: pl.DataFrame, by: Sequence[str], particles: str, steps: str, *,
         pl.len().alias("points"), *columns,
         (pl.col("core_seconds").sum() / 3600).alias("core-hours"),
         pl.col("wall_seconds").max().alias("longest point (s)")).sort(list(sort or by))
-    run = (d["core_seconds"] * (1.0 - d[prep].fill_nan(0.0) / d["wall_seconds"]) if prep
-           else d["core_seconds"])
+    run = d.select(run_seconds(points, prep))[:, 0]
     rate = float(d["particle_steps"].sum()) / float(run.sum())
     return per, rate
 
