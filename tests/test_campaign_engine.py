@@ -169,6 +169,18 @@ def test_reanalyse_calls_the_same_stop_rule(campaign):
     assert "runs_out" not in names and "arrests" in names
 
 
+def test_reanalyse_that_drops_every_point_leaves_none_done(tmp_path: Path):
+    run_points(Scripted(), POINTS[:1], Plan(), tmp_path, workers=1, log=lambda *_: None)
+    assert (tmp_path / "samples.parquet").exists()
+    assert reanalyse(Scripted(), Point, Plan(t_max=20.0), tmp_path) == 1
+    assert not (tmp_path / "points.parquet").exists()
+    assert not (tmp_path / "samples.parquet").exists()
+    # and the next run goes on with it, from its checkpoint, to the new budget
+    d = run_points(Scripted(), POINTS[:1], Plan(t_max=20.0), tmp_path, workers=1,
+                   log=lambda *_: None)
+    assert d["t_run"].to_list() == [20.0]
+
+
 class Ruled(Scripted):
     """Scripted, with rows written before its stop rule (no ``rule`` field) not done."""
 

@@ -6,6 +6,7 @@ a tiny dataset with replica means, "not enough data" and the coverage audit."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -129,7 +130,7 @@ def test_no_stop_before_the_minimum_length():
     assert not rp.converged({**row, "u_slip_se": math.nan}, plan, p)  # too few blocks
 
 
-def test_the_widths_campaign_runs_the_widest_first_rained_and_to_t_1000():
+def test_the_widths_campaign_runs_the_widest_first_rained_and_000s_2000_plus_600():
     plan = rp.widths_plan()
     allp = [*plan.points, *plan.branches]
     assert len({p.key for p in allp}) == len(allp)
@@ -148,12 +149,49 @@ def test_the_widths_campaign_runs_the_widest_first_rained_and_to_t_1000():
     assert {b for (w, p, b) in seeds if (w, p) == (60.0, 0.60)} == {10.0, 20.0, 40.0}
     assert {(b.kn, b.seed) for b in plan.branches} == {(k, s) for k in rp.STIFF_KN
                                                        for s in rp.SEEDS}
-    # no stop before t = 1000, however good the SEs
+    # 000's protocol: nothing averaged before t = 2000, 600 averaged, every run to 2600
     p = plan.points[0]
+    assert (plan.t_dev_of(p), plan.t_least(p), plan.limits(p)[0]) == (2000.0, 2600.0, 2600.0)
     row = {"state": "steady", "drift_tested": True, "T_avg": 700.0, "tau_max": 10.0,
-           "u_slip": 10.0, "u_slip_se": 0.01, "u_max": 13.0, "u_max_se": 0.01, "t_end": 999.0}
-    assert not rp.converged(row, plan, p)
-    assert rp.converged({**row, "t_end": 1000.0}, plan, p)
+           "u_slip": 10.0, "u_slip_se": 0.01, "u_max": 13.0, "u_max_se": 0.01,
+           "t_start": 1999.0}
+    assert not rp.converged(row, plan, p)  # however good the SEs
+    assert rp.converged({**row, "t_start": 2000.0}, plan, p)
+    assert not rp.converged({**row, "t_start": 2000.0, "T_avg": 590.0}, plan, p)
+    # a branch's parent developed its flow: its average may start at once
+    assert plan.t_dev_of(plan.branches[0]) == 0.0
+
+
+def test_the_steady_part_starts_after_the_development_time():
+    """A flow that develops (creeps up by 10 % over its first half, stationary after): MSER
+    alone may start the average in the creep; with t_dev the average starts at t_dev, and
+    nothing is averaged before t_dev + min_average."""
+    bins, series = channel_tables(nw=200, seed=3)
+    # the first half creeps: scale the flow of windows < 100 (t < 200) by 0.9 -> 1.0
+    t0 = np.asarray(bins.column("t0").to_numpy())
+    f = np.where(t0 < 200.0, 0.9 + 0.1 * t0 / 200.0, 1.0)
+    bins = bins.set_column(bins.schema.get_field_index("u_y"), "u_y",
+                           pa.array(np.asarray(bins.column("u_y").to_numpy()) * f))
+    t = np.asarray(series.column("t").to_numpy())
+    # (|v_cm| as noisy as a W = 20 run's, 4 %: MSER cannot see so slow a creep)
+    noise = 1.0 + 0.04 * np.random.default_rng(5).normal(size=t.size)
+    v = np.asarray(series.column("vcm_y").to_numpy()) * noise * np.where(
+        t < 200.0, 0.9 + 0.1 * t / 200.0, 1.0)
+    series = series.set_column(series.schema.get_field_index("vcm_y"), "vcm_y", pa.array(v))
+    plan = rp.Plan("dev", (), t_dev=200.0, min_average=150.0, t_max=400.0, min_taus=1.0,
+                   se_target=0.05)
+    p = rp.Point(20.0, 0.59)
+    row = rp.point_row(p, plan, bins, series)
+    assert row["t_start"] >= 200.0 and row["T_avg"] <= 200.0 + 1e-9
+    assert rp.converged(row, plan, p)
+    # the same run cut at t = 340 < t_dev + min_average: not averaged yet, runs on
+    cut = rp.point_row(p, plan, bins.filter(pa.array(np.asarray(bins.column("t1").to_numpy())
+                                                     <= 340.0)),
+                       series.filter(pa.array(t <= 340.0)))
+    assert "T_avg" not in cut and not cut["converged"] and cut["state"] == "fluctuating"
+    # without a development time the same tables are averaged from MSER's start
+    free = rp.point_row(p, replace(plan, t_dev=0.0), bins, series)
+    assert free["t_start"] < 200.0
 
 
 @pytest.mark.parametrize("make", [rp.full_plan, rp.paper_plan])
@@ -323,18 +361,24 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
     assert f"{n} runs of the widths plan" in "\n".join(fresh)
     assert _rate(fresh, "150") == (4e6, "W = 150 stints")
     runs, least, cap, longest = _row(fresh, "150")
-    assert runs == 3 and 0 < least < cap and longest < cap
-    # each W = 150 run is 33,770 spheres (phi_bar 0.60) for t >= 1000 at dt 3.79e-4
+    # 000's protocol: every run is 2000 + 600 long, its least its cap
+    assert runs == 3 and least == cap and longest < cap
+    # each W = 150 run is 33,770 spheres (phi_bar 0.60) for t = 2600 at dt 3.79e-4
     w150 = next(p for p in plan.points if p.W == 150 and p.phi_bar == 0.60)
-    assert least == pytest.approx(1.8 / 0.6 * 33770 * 1000 / w150.dt / 4e6 / 3600, rel=0.02)
-    # the phi_bar = 0.60 run has reached t = 1000: its least is done, its cap shorter
+    one = 33770 * 2600 / w150.dt / 4e6 / 3600
+    assert least == pytest.approx(1.8 / 0.6 * one, rel=0.02)
+    assert longest == pytest.approx(0.61 / 0.6 * one, rel=0.02)
+    # a branch must run its minimum average, and may run to its cap
+    b = plan.branches[0]
+    b_least, b_cap = plan.t_least(b), plan.limits(b)[0]
+    assert 0 < b_least < b_cap
+    # the phi_bar = 0.60 run has reached t = 1000: 1000 of its 2600 are done
     (tmp_path / "work" / w150.key).mkdir(parents=True)
     pl.DataFrame({"t": [0.0, 1000.0]}).write_parquet(tmp_path / "work" / w150.key /
                                                      "series.parquet")
     runs2, least2, cap2, _ = _row(remaining(tmp_path, plan, 4e6), "150")
-    assert runs2 == 3
-    assert least2 == pytest.approx(least * (0.59 + 0.61) / 1.8, abs=0.1)
-    assert cap - cap2 == pytest.approx(least - least2, abs=0.15)
+    assert runs2 == 3 and least2 == cap2
+    assert least - least2 == pytest.approx(one * 1000 / 2600, abs=0.15)
     assert remaining(tmp_path, rp.Plan("none", ()), 4e6) == []
 
 
@@ -372,8 +416,6 @@ def test_runs_left_are_costed_at_their_widths_measured_rate_or_a_wider_ones(tmp_
 
 
 def test_runs_still_to_do_and_the_paper_scale_are_costed_at_the_slower_rate():
-    from pathlib import Path
-
     from granflow.studies.reproduce_000_report import UNMEASURED_RATE, _cost_section, planning_rate
 
     assert planning_rate(None)[0] == UNMEASURED_RATE
@@ -381,10 +423,11 @@ def test_runs_still_to_do_and_the_paper_scale_are_costed_at_the_slower_rate():
                                                     "measured on this dataset")
     fast, why = planning_rate(2 * UNMEASURED_RATE)
     assert fast == UNMEASURED_RATE and "slower than this dataset" in why
-    # the committed widths dataset (W = 20 only) steps faster than a wide channel: its
-    # paper-scale estimate is costed at the wide rate, as its runs left are
-    d = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000_widths"
-    points = pl.read_parquet(d / "points.parquet")
+    # a dataset of W = 20 runs (the widths campaign's first, at ~1.4e7) steps faster than a
+    # wide channel: its paper-scale estimate is costed at the wide rate, as its runs left are
+    points = pl.DataFrame({"W": [20.0, 20.0], "kn": [1e5, 1e5], "n": [4500, 4500],
+                           "steps": [3_000_000, 2_000_000], "wall_seconds": [1000.0, 700.0],
+                           "cpu_seconds": [990.0, 690.0], "prep_seconds": [10.0, 8.0]})
     text, rate = _cost_section(points, rp.paper_plan())
     assert rate > UNMEASURED_RATE
     paper = next(ln for ln in text if ln.startswith("000 runs W = 60-150"))

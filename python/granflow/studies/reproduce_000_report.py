@@ -1010,10 +1010,10 @@ def rate_at(w: float, kn: float, rates: Mapping[tuple[float, float], float],
 def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[str]:
     """The plan's runs not yet in ``out``, per (W, k_n, B): how many, and their core-hours at
     the throughput measured on ``out``'s finished points at that width (:func:`rate_at`;
-    ``default`` where none bounds it), from the least each must run (t_min, or the minimum
-    average) to its cap (t_max), less what a started run has done (its series in
-    ``out/work``); the longest run's hours on one core; the recipe. Report lines; none when
-    the plan is done."""
+    ``default`` where none bounds it), from the least each must run (Plan.t_least: its
+    development and minimum average) to its cap (t_max), less what a started run has done
+    (its series in ``out/work``); the longest run's hours on one core; the recipe. Report
+    lines; none when the plan is done."""
     from ._campaign import done_keys
 
     planned = (*plan.points, *plan.branches, *plan.later)
@@ -1027,7 +1027,7 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
     rates = width_rates(_read(out, "points"))
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
     for p in left:
-        t_cap, t_avg = plan.limits(p)
+        t_cap = plan.limits(p)[0]
         series = out / "work" / p.key / "series.parquet"
         t_done = (float(pl.read_parquet(series, columns=["t"])["t"].max())  # type: ignore[arg-type]
                   if series.exists() and not p.parent else 0.0)
@@ -1039,7 +1039,7 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
                                                  "core-hours (cap)": 0.0,
                                                  "longest run (h, 1 core)": 0.0})
         row["runs"] += 1
-        row["core-hours (least)"] += per_t * max(plan.t_min_of(p), t_avg, t_done) - per_t * t_done
+        row["core-hours (least)"] += per_t * max(plan.t_least(p), t_done) - per_t * t_done
         row["core-hours (cap)"] += per_t * (t_cap - t_done)
         row["longest run (h, 1 core)"] = max(row["longest run (h, 1 core)"],
                                              per_t * (t_cap - t_done))
@@ -1052,7 +1052,8 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
                "what this plan would still run, for its own protocol only.", ""] if after
               else []),
             f"{len(left)} runs of the {plan.name} plan, each from the least it must run (a "
-            "branch its minimum average; the others t_min or the minimum average) to its cap "
+            "branch its minimum average; the others their development time and minimum average) "
+            "to its cap "
             f"(t = {plan.t_max:g}), less what a started run has done, at the throughput "
             "(`rate`, particle-steps per core-second) measured on this dataset's finished "
             "points at that width and k_n, else at the nearest wider width measured (a wider "

@@ -285,9 +285,12 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
         for k in study.tables:
             extra[k] += row.pop(k) if k in row else old_rows[k].get(point.key, [])
         keep.append(row)
-    write_rows(outp / "points.parquet", keep, point=cls)
-    for k, stem in study.tables.items():
-        write_rows(outp / f"{stem}.parquet", extra[k], point=cls)
+    for f, rows in ((outp / "points.parquet", keep),
+                    *((outp / f"{stem}.parquet", extra[k]) for k, stem in study.tables.items())):
+        if rows:
+            write_rows(f, rows, point=cls)
+        else:  # (every row dropped: write_rows writes nothing for none)
+            f.unlink(missing_ok=True)
     return dropped
 
 
