@@ -160,6 +160,12 @@ def test_the_widths_campaign_runs_the_widest_first_rained_and_000s_2000_plus_600
     assert not rp.converged({**row, "t_start": 2000.0, "T_avg": 590.0}, plan, p)
     # a branch's parent developed its flow: its average may start at once
     assert plan.t_dev_of(plan.branches[0]) == 0.0
+    # and the report says so
+    from granflow.studies.reproduce_000_report import stop_rule
+
+    text = stop_rule(plan)
+    assert "no earlier than t = 2000" in text and "every run that flows is 2600 long" in text
+    assert "no earlier" not in stop_rule(rp.full_plan())
 
 
 def test_the_steady_part_starts_after_the_development_time():

@@ -686,12 +686,18 @@ def stop_rule(plan: Any) -> str:
             "steady or fluctuating by granflow.analysis.channel_profiles.flow_state), "
             "stationary (the thirds test of u_slip, u_max, the mean velocity and the mean σxx "
             "per window, granflow.analysis.channel.steady_check: a drifting run is "
-            "\"drifting\" and runs on) and its steady part (MSER start) spans at least "
+            "\"drifting\" and runs on) and its steady part (MSER start"
+            + (f", no earlier than t = {plan.t_dev:g}, 000's development time" if plan.t_dev
+               else "") + ") spans at least "
             f"{plan.min_average:g} √(d/g) and {plan.min_taus:g} integrated correlation times "
             "of the slowest of those quantities; only then are the SE targets consulted "
             f"(the jackknife SEs of u_slip and u_max within {plan.se_target:.0%}; no SE from "
             f"fewer than {MIN_SE_BLOCKS} blocks). Or it arrests for two stints, or "
-            f"reaches t = {plan.t_max:g}.")
+            f"reaches t = {plan.t_max:g}."
+            + (f" So every run that flows is {plan.t_max:g} long (000's protocol): no SE "
+               "decides when it stops, and one that misses its SE target or drifts is "
+               "reported as it is." if plan.t_dev and plan.t_dev + plan.min_average
+               >= plan.t_max else ""))
 
 
 def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
