@@ -136,9 +136,13 @@ def test_the_widths_campaign_runs_the_widest_first_rained_and_000s_2000_plus_600
     assert len({p.key for p in allp}) == len(allp)
     assert all(p.prep == "rain" and p.H == rp.RAIN_H and p.key.endswith(f"_rain_s{p.seed}")
                for p in allp)
-    # the widest first: a partial campaign still answers the width question
-    first = [p.W for p in plan.points[:6]]
-    assert set(first) == {150.0, 100.0} and plan.points[0].phi_bar == 0.60
+    # phi_bar = 0.60 across every width first, the widest first: a partial campaign still
+    # answers the width question
+    first = [(p.W, p.phi_bar) for p in plan.points[:11]]
+    assert first[:2] == [(150.0, 0.60), (100.0, 0.60)]
+    assert {p for _, p in first} == {0.60} and [w for w, _ in first] == sorted(
+        (w for w, _ in first), reverse=True)
+    assert {w for w, _ in first} == {150.0, 100.0, 60.0, 40.0, 20.0}
     seeds: dict[tuple[float, float, float], set[int]] = {}
     for p in plan.points:
         seeds.setdefault((p.W, p.phi_bar, p.B), set()).add(p.seed)
