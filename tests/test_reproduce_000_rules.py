@@ -562,5 +562,10 @@ def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points(
     assert tab.filter(pl.col("W") == 40)["creep per 1000 t"][0] == pytest.approx(0.0)
     text = "\n".join(creep_lines(pl.DataFrame(rows), POINT_BY))
     assert "**1 of 2 points creep**" in text and f"W = 20, φ̄ = 0.6: {want:+.1%} per 1000" in text
+    # replicas that stop together (000's fixed length) are biased alike, not spread
+    assert "stopped apart" not in text
+    rows[0]["t_end"] = 1050.0
+    text = "\n".join(creep_lines(pl.DataFrame(rows), POINT_BY))
+    assert "the replicas of W = 20, φ̄ = 0.6 stopped apart" in text
     assert creep_lines(pl.DataFrame([{k: v for k, v in r.items() if "creep" not in k}
                                      for r in rows]), POINT_BY) == []
