@@ -227,3 +227,13 @@ def test_steady_state_start_of_several_observables_is_the_latest():
     assert both.criterion.endswith("latest over fast, slow")
     with pytest.raises(ValueError):
         S.steady_state_start(t, {})
+
+
+def test_the_weighted_mean_weighs_by_inverse_variance():
+    from granflow.analysis.stats import weighted_mean
+
+    m, se = weighted_mean([1.0, 2.0, 4.0], [1.0, 1.0, 1.0])
+    assert m == pytest.approx(7.0 / 3.0) and se == pytest.approx(3.0 ** -0.5)
+    # a value with half the SE weighs four times as much
+    m, se = weighted_mean([0.0, 1.0], [0.5, 1.0])
+    assert m == pytest.approx(0.2) and se == pytest.approx(5.0 ** -0.5)

@@ -28,6 +28,7 @@ from collections.abc import Sequence
 import polars as pl
 from scipy import stats
 
+from .stats.weighted import weighted_mean
 from .tables import TableLike, to_polars
 
 __all__ = ["DISAGREE_P", "MIN_REPLICAS", "mean_profiles", "replica_mean", "small_sample_factor"]
@@ -78,7 +79,7 @@ def replica_mean(df: TableLike, by: Sequence[str],
             agree = math.nan
             if k >= MIN_REPLICAS and math.isfinite(within) and (se > 0).all():
                 w = 1.0 / se**2
-                q = float((w * (x - (w * x).sum() / w.sum()) ** 2).sum())
+                q = float((w * (x - weighted_mean(x, se)[0]) ** 2).sum())
                 agree = float(stats.chi2.sf(q, k - 1))
             row[f"{o}_agree_p"] = agree
             row[f"{o}_se_within"] = within

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
+from granflow.analysis.stats import weighted_mean
 from granflow.errors import ParameterError
 
 from ._checks import FloatArray
@@ -212,7 +213,7 @@ def trend(table: pl.DataFrame, against: str) -> Trend:
                              ">= 3 for a trend")
     a, s, v = (t[c].to_numpy().astype(np.float64) for c in ("A", "A_se", against))
     w = 1.0 / s**2
-    mean, mean_se = float(np.sum(w * a) / np.sum(w)), float(np.sum(w) ** -0.5)
+    mean, mean_se = weighted_mean(a, s)
     chi2 = float(np.sum(w * (a - mean) ** 2)) / (a.size - 1)
     vc = v - np.sum(w * v) / np.sum(w)
     sxx = float(np.sum(w * vc * vc))

@@ -11,6 +11,7 @@ import numpy as np
 import polars as pl
 
 from granflow.analysis.coverage import steady_rows
+from granflow.analysis.stats import weighted_mean
 
 from ._campaign import md_table
 
@@ -33,9 +34,7 @@ def creep_table(points: pl.DataFrame, by: Sequence[str]) -> pl.DataFrame:
                    & (pl.col("creep_se") > 0))
     rows = []
     for key, g in st.sort("seed").group_by(list(by), maintain_order=True):
-        w = 1.0 / g["creep_se"].to_numpy() ** 2
-        c = float((w * g["creep"].to_numpy()).sum() / w.sum())
-        se = float(w.sum() ** -0.5)
+        c, se = weighted_mean(g["creep"].to_numpy(), g["creep_se"].to_numpy())
         rows.append({**dict(zip(by, key, strict=True)), "replicas": g.height,
                      "creep per 1000 t": c, "SE": se, "z": c / se,
                      "replicas' z": ", ".join(f"{z:+.1f}" for z in g["creep_z"].to_list()),

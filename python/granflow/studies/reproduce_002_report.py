@@ -18,6 +18,7 @@ from granflow.analysis import rheology as rh
 from granflow.analysis.compare import AGREE_SIGMA, agrees, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.replicas import DISAGREE_P, replica_mean
+from granflow.analysis.stats import weighted_mean
 
 from ._campaign import (
     cost,
@@ -463,9 +464,7 @@ def _mean_residual(g: pl.DataFrame, col: str,
     y = np.asarray(curve(ii))
     slope = (np.asarray(curve(ii + eps)) - y) / eps
     se = np.sqrt(g[f"{col}_se"].to_numpy() ** 2 + (slope * g["I_se"].to_numpy()) ** 2)
-    w = 1.0 / se**2
-    d = g[col].to_numpy() - y
-    return float(np.sum(w * d) / np.sum(w)), float(1.0 / np.sqrt(np.sum(w)))
+    return weighted_mean(g[col].to_numpy() - y, se)
 
 
 #: the laws whose pressure collapse is tested (002 draws panels (b) of figs. 3, 4, 6)

@@ -8,6 +8,7 @@
 * :mod:`.se_time` — SE against averaging time and its extrapolation.
 * :mod:`.block_jackknife` — the delete-one-block jackknife (no SE from fewer than
   MIN_SE_BLOCKS blocks).
+* :mod:`.weighted` — the inverse-variance mean of independent estimates.
 
 Everything here works on *samples* of a time series (one row per sample of a ``series`` table, or
 one window of a ``bins`` table) and never on particles. A value with its error is an
@@ -45,6 +46,7 @@ from .se_time import (
 from .shared_mode import REGRESSION_BLOCKS, shared_mode_se
 from .stationarity import DRIFT_Z, Stationarity, stationarity
 from .steady import SteadyStart, Trend, steady_state_start, trend
+from .weighted import weighted_mean
 
 __all__ = [
     "DEFAULT_ALPHA",
@@ -78,4 +80,5 @@ __all__ = [
     "stationarity",
     "steady_state_start",
     "trend",
+    "weighted_mean",
 ]
