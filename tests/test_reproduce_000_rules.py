@@ -156,26 +156,26 @@ def test_the_widths_campaign_runs_the_widest_first_rained_and_000s_2000_plus_600
     # 000's protocol: nothing averaged before t = 2000, 600 averaged, every run to 2600
     p = plan.points[0]
     assert (plan.t_dev_of(p), plan.t_least(p), plan.limits(p)[0]) == (2000.0, 2600.0, 2600.0)
-    row = {"state": "steady", "drift_tested": True, "T_avg": 700.0, "tau_max": 10.0,
+    row = {"state": "steady", "drift_tested": True, "T_avg": 600.0, "tau_max": 10.0,
            "u_slip": 10.0, "u_slip_se": 0.01, "u_max": 13.0, "u_max_se": 0.01,
-           "t_start": 1999.0}
+           "t_start": 1999.0, "t_end": 2599.99}
     assert not rp.converged(row, plan, p)  # however good the SEs
     assert rp.converged({**row, "t_start": 2000.0}, plan, p)
-    assert not rp.converged({**row, "t_start": 2000.0, "T_avg": 590.0}, plan, p)
+    assert not rp.converged({**row, "t_start": 2000.0, "t_end": 2590.0}, plan, p)
     # a branch's parent developed its flow: its average may start at once
     assert plan.t_dev_of(plan.branches[0]) == 0.0
     # and the report says so
     from granflow.studies.reproduce_000_report import stop_rule
 
     text = stop_rule(plan)
-    assert "no earlier than t = 2000" in text and "every run that flows is 2600 long" in text
-    assert "no earlier" not in stop_rule(rp.full_plan())
+    assert "from t = 2000" in text and "every run that flows is 2600 long" in text
+    assert "MSER start" in stop_rule(rp.full_plan())
 
 
 def test_the_steady_part_starts_after_the_development_time():
     """A flow that develops (creeps up by 10 % over its first half, stationary after): MSER
-    alone may start the average in the creep; with t_dev the average starts at t_dev, and
-    nothing is averaged before t_dev + min_average."""
+    alone may start the average in the creep; with t_dev the average starts at t_dev (000's
+    protocol), and nothing is averaged before t_dev + min_average."""
     bins, series = channel_tables(nw=200, seed=3)
     # the first half creeps: scale the flow of windows < 100 (t < 200) by 0.9 -> 1.0
     t0 = np.asarray(bins.column("t0").to_numpy())
@@ -192,13 +192,19 @@ def test_the_steady_part_starts_after_the_development_time():
                    se_target=0.05)
     p = rp.Point(20.0, 0.59)
     row = rp.point_row(p, plan, bins, series)
-    assert row["t_start"] >= 200.0 and row["T_avg"] <= 200.0 + 1e-9
+    assert row["t_start"] == pytest.approx(200.0) and row["T_avg"] <= 200.0 + 1e-9
     assert rp.converged(row, plan, p)
     # the same run cut at t = 340 < t_dev + min_average: not averaged yet, runs on
     cut = rp.point_row(p, plan, bins.filter(pa.array(np.asarray(bins.column("t1").to_numpy())
                                                      <= 340.0)),
                        series.filter(pa.array(t <= 340.0)))
     assert "T_avg" not in cut and not cut["converged"] and cut["state"] == "fluctuating"
+    # a run that ran to exactly t_dev + min_average: its blocks start at a window from t_dev
+    # (whole blocks: some windows later) and its last sample is one sample short
+    exact = replace(plan, t_dev=201.0, min_average=199.0)
+    assert exact.t_least(p) == 400.0 and t[-1] < 400.0
+    r = rp.point_row(p, exact, bins, series)
+    assert r["t_start"] >= 202.0 and r["T_avg"] < 199.0 and rp.converged(r, exact, p)
     # without a development time the same tables are averaged from MSER's start
     free = rp.point_row(p, replace(plan, t_dev=0.0), bins, series)
     assert free["t_start"] < 200.0
@@ -525,6 +531,15 @@ def test_unconverged_ses_are_blamed_on_the_rule_only_where_the_runs_predate_it(t
     assert "had not converged" in old and "this dataset predates them" in old
     assert "had not converged" in new and "predates" not in new
     assert "coverage audit below" in new
+    # a quarter too short for 10 blocks (000's 600 averaged): judged on the half
+    nan_q = se.with_columns(pl.when(pl.col("fraction") == 0.25).then(float("nan"))
+                            .otherwise(pl.col("u_slip_se")).alias("u_slip_se"),
+                            pl.when(pl.col("fraction") == 0.25).then(float("nan"))
+                            .otherwise(pl.col("u_max_se")).alias("u_max_se"))
+    half = "\n".join(_se_section(nan_q, tmp_path, ruled=True)[0])
+    assert "first 0.5 of a steady part is 1.00 (u_slip)" in half
+    none = "\n".join(_se_section(nan_q.filter(pl.col("fraction") != 0.5), tmp_path)[0])
+    assert "No stretch shorter than a whole steady part has" in none
 
 
 def test_the_creep_of_a_steady_part_is_its_relative_trend_per_1000_time_units():

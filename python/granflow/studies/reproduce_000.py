@@ -22,10 +22,10 @@ the widths plan's) and run in stints of ``stint`` time units. It stops when
   u_slip and u_max must be within ``se_target`` of their values (an SE from fewer than
   MIN_SE_BLOCKS blocks is NaN and meets no target). The minimum length keeps a run from
   stopping because its SE estimate happened to dip (optional stopping biases every SE small).
-  A plan may give a development time ``t_dev`` (000 §2: 2000): the steady part then starts no
-  earlier than it, and nothing is averaged before ``t_dev + min_average``. The widths and paper
-  plans run 000's protocol, 2000 + 600 with ``t_max`` = 2600: every run that flows is the same
-  length, so no SE decides when it stops; or
+  A plan may give a development time ``t_dev`` (000 §2: 2000): the steady part then starts at
+  it (not at MSER's start), and nothing is averaged before ``t_dev + min_average``. The widths
+  and paper plans run 000's protocol, 2000 + 600 with ``t_max`` = 2600: every run that flows
+  is the same length, so no SE decides when it stops; or
 * it is **arrested** (|vcm_y| < 1e-3 sqrt(g d) over the last half) at two stints running; or
 * it reached ``t_max`` (its last state is recorded: accelerating, decelerating, drifting, ...).
 
@@ -81,6 +81,9 @@ SEEDS = tuple(range(1, REPLICAS + 1))
 #: sample interval in time units (~100 steps at k_n = 1e5) and samples per window
 SAMPLE_DT = 0.04
 WINDOW = 50
+#: a run's last sample comes up to a sample interval (SAMPLE_DT) before the time it ran to:
+#: its length is compared with the plan's to within this (time units, under a window)
+TIME_TOL = 0.5
 
 
 @dataclass(frozen=True)
@@ -129,10 +132,11 @@ class Plan:
     t_max: float = 1500.0
     #: steady averaging time a point needs at least (000 averages 600)
     min_average: float = 200.0
-    #: development time: the steady part starts no earlier (000 §2: 2000 of development
-    #: before its 600 of averaging). A flow still developing when MSER starts its steady part
-    #: creeps through it (the W = 20 rain runs from t ~ 600: +4 % per 1000 time units,
-    #: benchmarks/NOTES.md "channel creep"), which the thirds test is too weak to see.
+    #: development time: the steady part starts there (000 §2: 2000 of development before
+    #: its 600 of averaging; 0: at MSER's start). A flow still developing when MSER starts
+    #: its steady part creeps through it (the W = 20 rain runs from t ~ 600: +4 % per 1000
+    #: time units, benchmarks/NOTES.md "channel creep"), which the thirds test is too weak to
+    #: see.
     t_dev: float = 0.0
     #: integrated correlation times of the slowest of granflow.analysis.channel's
     #: STEADY_QUANTITIES the steady part must span before the SE targets are consulted (~10
@@ -291,11 +295,11 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table,
     row.update(state=fs.state, t_end=float(t[-1]), vcm_tail=fs.v_mean,
                rel_amplitude=fs.rel_amplitude, rel_drift=fs.rel_drift)
     t_dev = plan.t_dev_of(point)
-    if not fs.is_steady or (t_dev and t[-1] < plan.t_least(point) - 1e-9):
+    if not fs.is_steady or (t_dev and t[-1] + TIME_TOL < plan.t_least(point)):
         return row
-    prof = profiles(bins, series)
-    if prof.t_start < t_dev:
-        prof = profiles(bins, start_time=t_dev)
+    # (000's protocol averages from its development time on; MSER after it would only cut
+    # a few windows of noise and leave the average short of min_average at t_max)
+    prof = profiles(bins, start_time=t_dev) if t_dev else profiles(bins, series)
     s = ach.summary(bins, series, start_time=prof.t_start)
     row.update(t_start=prof.t_start, T_avg=float(t[-1] - prof.t_start),
                n_blocks=prof.n_blocks)
@@ -351,16 +355,21 @@ def creep_row(series: pa.Table, t_start: float) -> dict[str, Any]:
 
 def long_enough(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
     """Whether a steady run is stationary (tested by the thirds test and not drifting) and its
-    steady part starts after the plan's development time and spans its ``min_average`` and
-    ``min_taus`` correlation times of its slowest reported quantity (``tau_max``): the
-    minimum length before any SE target is consulted."""
+    steady part spans the plan's ``min_average`` and ``min_taus`` correlation times of its
+    slowest reported quantity (``tau_max``): the minimum length before any SE target is
+    consulted. With a development time the steady part starts after it, and the run must
+    have reached ``t_dev + min_average`` (000's protocol is a run length: ``T_avg``, the
+    span the blocks used, may fall short of it by the windows left out of whole blocks)."""
     state = row.get("state", "")
     t_avg = row.get("T_avg", 0.0)
     tau = row.get("tau_max", math.nan)
+    t_dev = plan.t_dev_of(point)
+    long = (row.get("t_end", 0.0) + TIME_TOL >= plan.t_least(point) if t_dev
+            else t_avg >= plan.limits(point)[1])
     return (state in FlowState._value2member_map_ and FlowState(state).is_steady
             and bool(row.get("drift_tested")) and math.isfinite(tau)
-            and t_avg >= plan.limits(point)[1] and t_avg >= plan.min_taus * tau
-            and row.get("t_start", 0.0) >= plan.t_dev_of(point) - 1e-9)
+            and long and t_avg >= plan.min_taus * tau
+            and row.get("t_start", 0.0) >= t_dev - 1e-9)
 
 
 def converged(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:

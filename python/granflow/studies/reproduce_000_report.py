@@ -686,9 +686,9 @@ def stop_rule(plan: Any) -> str:
             "steady or fluctuating by granflow.analysis.channel_profiles.flow_state), "
             "stationary (the thirds test of u_slip, u_max, the mean velocity and the mean σxx "
             "per window, granflow.analysis.channel.steady_check: a drifting run is "
-            "\"drifting\" and runs on) and its steady part (MSER start"
-            + (f", no earlier than t = {plan.t_dev:g}, 000's development time" if plan.t_dev
-               else "") + ") spans at least "
+            "\"drifting\" and runs on) and its steady part ("
+            + (f"from t = {plan.t_dev:g}, 000's development time" if plan.t_dev
+               else "MSER start") + ") spans at least "
             f"{plan.min_average:g} √(d/g) and {plan.min_taus:g} integrated correlation times "
             "of the slowest of those quantities; only then are the SE targets consulted "
             f"(the jackknife SEs of u_slip and u_max within {plan.se_target:.0%}; no SE from "
@@ -877,9 +877,17 @@ def _se_section(se: pl.DataFrame, figdir: Path, ruled: bool = False) -> Section:
              "number of blocks), as a ratio to the SE from all of it (median over points). "
              "A converged SE of a stationary series shrinks as T^-1/2 (last column).", "",
              md_table(shrink, {"blocks (median)": ".0f"}), ""]
-    q = shrink.filter(pl.col("fraction") == shrink["fraction"].min()).row(0, named=True)
+    # (the shortest stretch with SEs: a null ratio had no point with the blocks for one)
+    has = shrink.filter((pl.col("fraction") < 1.0) & pl.col("SE(u_slip)/SE(all)").is_finite()
+                        & pl.col("SE(u_max)/SE(all)").is_finite())
+    if not has.height:
+        lines += [f"No stretch shorter than a whole steady part has {MIN_SE_BLOCKS} blocks "
+                  "for an SE yet: the error against run time needs longer averages.", ""]
+        has = shrink.tail(1)
+    q = has.row(0, named=True)
     want = q["expected (T^-1/2)"]
-    got = (q["SE(u_slip)/SE(all)"], q["SE(u_max)/SE(all)"])
+    got = tuple(math.nan if g is None else g for g in (q["SE(u_slip)/SE(all)"],
+                                                       q["SE(u_max)/SE(all)"]))
     if all(math.isfinite(g) for g in got) and min(got) < SE_CONVERGED * want:
         lines += [f"**The SEs had not converged.** The SE from the first {q['fraction']:g} of "
                   f"a steady part is {got[0]:.2f} (u_slip) and {got[1]:.2f} (u_max) times the "
