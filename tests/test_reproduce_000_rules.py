@@ -376,6 +376,9 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
     n = len(plan.points) + len(plan.branches)
     assert f"{n} runs of the widths plan" in "\n".join(fresh)
     assert _rate(fresh, "150") == (4e6, "W = 150 stints")
+    # the piece the plan runs first: phi_bar = 0.60 at every width, B = 10
+    assert "φ̄ = 0.6 at every width (B = 10), which the plan runs first, 11 runs" in "\n".join(
+        fresh)
     runs, least, cap, longest = _row(fresh, "150")
     # 000's protocol: every run is 2000 + 600 long, its least its cap
     assert runs == 3 and least == cap and longest < cap

@@ -1040,6 +1040,9 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
         return []
     rates = width_rates(_read(out, "points"))
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
+    # (the plan's first phi_bar at its first depth, every width: the piece it runs first)
+    head = planned[0]
+    first = [0, 0.0]
     for p in left:
         t_cap = plan.limits(p)[0]
         series = out / "work" / p.key / "series.parquet"
@@ -1055,6 +1058,9 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
         row["runs"] += 1
         row["core-hours (least)"] += per_t * max(plan.t_least(p), t_done) - per_t * t_done
         row["core-hours (cap)"] += per_t * (t_cap - t_done)
+        if not p.parent and (p.phi_bar, p.B, p.kn) == (head.phi_bar, head.B, head.kn):
+            first[0] += 1
+            first[1] += per_t * (t_cap - t_done)
         row["longest run (h, 1 core)"] = max(row["longest run (h, 1 core)"],
                                              per_t * (t_cap - t_done))
     tab = pl.DataFrame(sorted(rows.values(), key=lambda d: (-d["W"], d["k_n"], d["B"])))
@@ -1078,7 +1084,11 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
                            "core-hours (least)": ".1f", "core-hours (cap)": ".1f",
                            "longest run (h, 1 core)": ".1f"}), "",
             f"About {lo:.0f}-{hi:.0f} core-hours: {lo / 6:.0f}-{hi / 6:.0f} sessions of 3 h "
-            "on this 2-core machine. On a cluster each point is one task of one "
+            "on this 2-core machine"
+            + (f"; of these, φ̄ = {head.phi_bar:g} at every width (B = {head.B:g}), which the "
+               f"plan runs first, {first[0]} runs and at most {first[1]:.0f} core-hours "
+               f"({first[1] / 6:.0f} sessions)" if first[0] else "")
+            + ". On a cluster each point is one task of one "
             f"thread (it checkpoints every stint and resumes from there); the longest takes "
             f"{longest:.0f} h on one core, so the jobs' walltime below:", "",
             *dask_recipe("granflow.studies.reproduce_000", f"{out}",
