@@ -863,7 +863,7 @@ def _se_section(se: pl.DataFrame, figdir: Path, ruled: bool = False) -> Section:
     def ratio(c: str) -> pl.Expr:
         # (over the points with both SEs: a stretch under 10 blocks has none)
         r = pl.col(f"{c}_se") / pl.col(f"{c}_se_all")
-        return r.filter(r.is_finite()).median().alias(f"SE({c})/SE(all)")
+        return r.filter(r.is_finite()).median().fill_null(math.nan).alias(f"SE({c})/SE(all)")
 
     shrink = se.join(se.filter(pl.col("fraction") == 1.0), on=key, suffix="_all").group_by(
         "fraction").agg(
