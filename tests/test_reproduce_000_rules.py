@@ -476,6 +476,8 @@ def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path)
     text = "\n".join(remaining(tmp_path, rp.full_plan(), 4e6))
     assert "The widths (`--widths`" in text and "carries this one's question on" in text
     assert "carries" not in "\n".join(remaining(tmp_path, rp.widths_plan(), 4e6))
+    # (the full plan runs width by width: no phi_bar piece comes first)
+    assert "which the plan runs first" not in text
 
 
 def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():

@@ -1040,8 +1040,15 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
         return []
     rates = width_rates(_read(out, "points"))
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
-    # (the plan's first phi_bar at its first depth, every width: the piece it runs first)
+    # (the plan's first phi_bar at its first depth, every width: the piece it runs first,
+    # where the plan's points begin with all of them)
     head = planned[0]
+
+    def in_head(p: Any) -> bool:
+        return not p.parent and (p.phi_bar, p.B, p.kn) == (head.phi_bar, head.B, head.kn)
+
+    n_head = sum(map(in_head, plan.points))
+    head_first = all(map(in_head, plan.points[:n_head]))
     first = [0, 0.0]
     for p in left:
         t_cap = plan.limits(p)[0]
@@ -1058,7 +1065,7 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
         row["runs"] += 1
         row["core-hours (least)"] += per_t * max(plan.t_least(p), t_done) - per_t * t_done
         row["core-hours (cap)"] += per_t * (t_cap - t_done)
-        if not p.parent and (p.phi_bar, p.B, p.kn) == (head.phi_bar, head.B, head.kn):
+        if head_first and in_head(p):
             first[0] += 1
             first[1] += per_t * (t_cap - t_done)
         row["longest run (h, 1 core)"] = max(row["longest run (h, 1 core)"],
