@@ -135,8 +135,8 @@ class Plan:
     #: development time: the steady part starts there (000 §2: 2000 of development before
     #: its 600 of averaging; 0: at MSER's start). A flow still developing when MSER starts
     #: its steady part creeps through it (the W = 20 rain runs from t ~ 600: +4 % per 1000
-    #: time units, benchmarks/NOTES.md "channel creep"), which the thirds test is too weak to
-    #: see.
+    #: time units, benchmarks/NOTES.md "the W = 20 channel develops until t ~ 1800"), which
+    #: the thirds test is too weak to see.
     t_dev: float = 0.0
     #: integrated correlation times of the slowest of granflow.analysis.channel's
     #: STEADY_QUANTITIES the steady part must span before the SE targets are consulted (~10

@@ -886,8 +886,7 @@ def _se_section(se: pl.DataFrame, figdir: Path, ruled: bool = False) -> Section:
         has = shrink.tail(1)
     q = has.row(0, named=True)
     want = q["expected (T^-1/2)"]
-    got = tuple(math.nan if g is None else g for g in (q["SE(u_slip)/SE(all)"],
-                                                       q["SE(u_max)/SE(all)"]))
+    got = (q["SE(u_slip)/SE(all)"], q["SE(u_max)/SE(all)"])
     if all(math.isfinite(g) for g in got) and min(got) < SE_CONVERGED * want:
         lines += [f"**The SEs had not converged.** The SE from the first {q['fraction']:g} of "
                   f"a steady part is {got[0]:.2f} (u_slip) and {got[1]:.2f} (u_max) times the "

@@ -62,6 +62,8 @@ def creep_lines(points: pl.DataFrame, by: Sequence[str]) -> list[str]:
                                  if c in tab.columns)),
                       {"creep per 1000 t": "+.4f", "SE": ".4f", "z": "+.1f"}), ""]
     if creeping.height:
+        apart = ", ".join(f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}"
+                          for r in creeping.iter_rows(named=True) if r["stopped apart"])
         lines += [f"**{creeping.height} of {tab.height} points creep** (pooled |z| > "
                   f"{CREEP_Z:g}): "
                   + "; ".join(f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}: "
@@ -69,10 +71,7 @@ def creep_lines(points: pl.DataFrame, by: Sequence[str]) -> list[str]:
                               f"{r['z']:+.1f})" for r in creeping.iter_rows(named=True))
                   + ". These flows were still changing through their averaged spans (+: "
                   "speeding up): they had not finished developing when the average began"
-                  + ("; the replicas of " + ", ".join(
-                      f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}" for r in apart)
-                     + " stopped apart, so their spread in the audit above is in part where "
-                     "each one stopped" if (apart := [r for r in creeping.iter_rows(named=True)
-                                                       if r["stopped apart"]]) else "")
+                  + (f"; the replicas of {apart} stopped apart, so their spread in the audit "
+                     "above is in part where each one stopped" if apart else "")
                   + ".", ""]
     return lines
