@@ -369,7 +369,7 @@ def _rate(lines: list[str], w: str) -> tuple[float, str]:
 
 
 def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_path):
-    from granflow.studies.reproduce_000_report import remaining
+    from granflow.studies.reproduce_000_report_cost import remaining
 
     plan = rp.widths_plan()
     fresh = remaining(tmp_path, plan, 4e6)
@@ -402,7 +402,7 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
 
 
 def test_runs_left_are_costed_at_their_widths_measured_rate_or_a_wider_ones(tmp_path):
-    from granflow.studies.reproduce_000_report import _particles, remaining
+    from granflow.studies.reproduce_000_report_cost import particles, remaining
 
     plan = rp.widths_plan()
     done = next(p for p in plan.points if p.W == 20 and p.phi_bar == 0.6 and p.seed == 1)
@@ -430,12 +430,16 @@ def test_runs_left_are_costed_at_their_widths_measured_rate_or_a_wider_ones(tmp_
     # the W = 20 rows' hours at the W = 20 rate: 8 runs left, from t = 0 to 2600 at most
     runs, _, cap, _ = _row(lines, "20")
     assert runs == 8 and cap == pytest.approx(
-        sum(_particles(p) / p.dt * 2600 / r20 / 3600 for p in plan.points
+        sum(particles(p) / p.dt * 2600 / r20 / 3600 for p in plan.points
             if p.W == 20 and p.key != done.key), rel=0.01)
 
 
 def test_runs_still_to_do_and_the_paper_scale_are_costed_at_the_slower_rate():
-    from granflow.studies.reproduce_000_report import UNMEASURED_RATE, _cost_section, planning_rate
+    from granflow.studies.reproduce_000_report_cost import (
+        UNMEASURED_RATE,
+        cost_section,
+        planning_rate,
+    )
 
     assert planning_rate(None)[0] == UNMEASURED_RATE
     assert planning_rate(0.5 * UNMEASURED_RATE) == (0.5 * UNMEASURED_RATE,
@@ -447,7 +451,7 @@ def test_runs_still_to_do_and_the_paper_scale_are_costed_at_the_slower_rate():
     points = pl.DataFrame({"W": [20.0, 20.0], "kn": [1e5, 1e5], "n": [4500, 4500],
                            "steps": [3_000_000, 2_000_000], "wall_seconds": [1000.0, 700.0],
                            "cpu_seconds": [990.0, 690.0], "prep_seconds": [10.0, 8.0]})
-    text, rate = _cost_section(points, rp.paper_plan())
+    text, rate = cost_section(points, rp.paper_plan())
     assert rate > UNMEASURED_RATE
     paper = next(ln for ln in text if ln.startswith("000 runs W = 60-150"))
     assert f"at {UNMEASURED_RATE:.3g} particle-steps per core-second" in paper
@@ -471,7 +475,7 @@ def test_the_committed_pour_dataset_resumes_though_its_rows_predate_point_prep()
 
 
 def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path):
-    from granflow.studies.reproduce_000_report import remaining
+    from granflow.studies.reproduce_000_report_cost import remaining
 
     text = "\n".join(remaining(tmp_path, rp.full_plan(), 4e6))
     assert "The widths (`--widths`" in text and "carries this one's question on" in text
