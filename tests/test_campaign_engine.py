@@ -218,6 +218,9 @@ def test_the_cell_campaign_counts_only_rows_its_stop_rule_judged():
 
     assert STUDY.current({"state": "flowing", "tau_max": 12.0})
     assert STUDY.current({"state": "runaway", "tau_max": math.nan})  # judged, no tau
+    # an error row has no tau_max at all: done, not run again at every start
+    assert STUDY.current({"state": "runaway", "tau_max": None})
+    assert STUDY.current({"state": "failed"})
     assert not STUDY.current({"state": "flowing", "tau_max": None})  # before the rule
     assert not STUDY.current({"state": "flowing"})
 
