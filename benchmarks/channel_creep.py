@@ -7,8 +7,9 @@ plan's cap with no stop before it, then print |v_cm| and the phi profile per win
 The point's work directory (its checkpoint, git-ignored: on the machine that ran it) is copied
 to ``--work`` first, so the campaign's own checkpoint and rows are left as they are. The
 continuation runs the widths plan's stints with the SE target set to 0 (never met), so it
-stops only at t_max (2600). Printed: per ``--window`` time units, the mean |v_cm|, phi per bin
-from the wall to the centre (folded) and the mean sigma_xx; then the row's creep over its
+stops only at the plan's cap (t_max). Printed: per ``--window`` time units, the mean
+|v_cm|, phi per bin from the wall to the centre (folded) and the mean sigma_xx; then the
+row's creep over its
 steady part (reproduce_000.creep_row). The flow-development question of the widths report's
 creep section ("Creep within the steady parts").
 """

@@ -15,6 +15,7 @@ import pyarrow as pa
 import pytest
 from granflow.errors import DilationError, InstabilityError, ParameterError
 from granflow.studies._campaign import Study, reanalyse, run_point, run_points
+from granflow.studies._campaign.engine import is_current
 
 
 @dataclass(frozen=True)
@@ -218,9 +219,11 @@ def test_the_cell_campaign_counts_only_rows_its_stop_rule_judged():
 
     assert STUDY.current({"state": "flowing", "tau_max": 12.0})
     assert STUDY.current({"state": "runaway", "tau_max": math.nan})  # judged, no tau
-    # an error row has no tau_max at all: done, not run again at every start
-    assert STUDY.current({"state": "runaway", "tau_max": None})
-    assert STUDY.current({"state": "failed"})
+    # an error row has no tau_max at all: done (the engine's rule for every study), not run
+    # again at every start
+    assert is_current(STUDY, {"state": "runaway", "tau_max": None})
+    assert is_current(STUDY, {"state": "failed"})
+    assert not is_current(STUDY, {"state": "flowing"})
     assert not STUDY.current({"state": "flowing", "tau_max": None})  # before the rule
     assert not STUDY.current({"state": "flowing"})
 

@@ -45,7 +45,7 @@ from granflow.errors import ParameterError
 
 from ._campaign import core_seconds, md_table, pm_column
 from ._campaign.cell import STUDY, Point, channel_material
-from ._campaign.engine import with_defaults
+from ._campaign.engine import is_current, with_defaults
 from .cross_scene_report_bulk import bulk_lines
 
 MODELS = ("local", "nonlocal")
@@ -537,8 +537,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
 
 def _before_the_rule(raw: pl.DataFrame) -> list[str]:
     """A bullet for the calibration runs written before the present stop rule (those
-    :meth:`granflow.studies._campaign.cell.CellStudy.current` does not count as done)."""
-    old = [r for r in raw.iter_rows(named=True) if not STUDY.current(r)]
+    :func:`granflow.studies._campaign.engine.is_current` does not count as done)."""
+    old = [r for r in raw.iter_rows(named=True) if not is_current(STUDY, r)]
     if not old:
         return []
     return [f"* {len(old)} of the {raw.height} cell runs above predate the stop rule of the "

@@ -164,6 +164,11 @@ class Plan:
         its minimum average."""
         return self.t_dev_of(point) + self.limits(point)[1]
 
+    def reached_least(self, point: Point, t_end: float) -> bool:
+        """Whether a run of ``point`` whose last sample is at ``t_end`` ran its least
+        (:meth:`t_least`, to within TIME_TOL)."""
+        return t_end + TIME_TOL >= self.t_least(point)
+
 
 WIDTHS = (20.0, 40.0, 60.0)
 PHIS = (0.59, 0.60, 0.61)
@@ -304,7 +309,7 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table,
     row.update(state=fs.state, t_end=float(t[-1]), vcm_tail=fs.v_mean,
                rel_amplitude=fs.rel_amplitude, rel_drift=fs.rel_drift)
     t_dev = plan.t_dev_of(point)
-    if not fs.is_steady or (t_dev and t[-1] + TIME_TOL < plan.t_least(point)):
+    if not fs.is_steady or (t_dev and not plan.reached_least(point, float(t[-1]))):
         return row
     # (000's protocol averages from its development time on; MSER after it would only cut
     # a few windows of noise and leave the average short of min_average at t_max)
@@ -373,7 +378,7 @@ def long_enough(row: Mapping[str, Any], plan: Plan, point: Point) -> bool:
     t_avg = row.get("T_avg", 0.0)
     tau = row.get("tau_max", math.nan)
     t_dev = plan.t_dev_of(point)
-    long = (row.get("t_end", 0.0) + TIME_TOL >= plan.t_least(point) if t_dev
+    long = (plan.reached_least(point, row.get("t_end", 0.0)) if t_dev
             else t_avg >= plan.limits(point)[1])
     return (state in FlowState._value2member_map_ and FlowState(state).is_steady
             and bool(row.get("drift_tested")) and math.isfinite(tau)

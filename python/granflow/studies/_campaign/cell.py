@@ -40,7 +40,6 @@ import pyarrow as pa
 from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.errors import ParameterError
 from granflow.material import MATERIAL_000, MATERIAL_002, DtRule, Material
-from granflow.states import FlowState
 
 from .engine import Study, fmt, run_points
 from .engine import reanalyse as engine_reanalyse
@@ -307,11 +306,9 @@ class CellStudy(Study):
     def current(self, row: Mapping[str, Any]) -> bool:
         # every row the present stop rule judged carries tau_max (NaN where a quantity has
         # no correlation time); rows from before it (the first cross_scene calibration: no
-        # stationarity test, no floor of correlation times, SEs on a few blocks) do not. A
-        # run that ended on an error (runaway, failed) was never judged, under either rule,
-        # and its row has no tau_max: it is done (else every start would run it again)
-        return (row.get("tau_max") is not None
-                or row.get("state") in (FlowState.RUNAWAY.value, FlowState.FAILED.value))
+        # stationarity test, no floor of correlation times, SEs on a few blocks) do not (rows
+        # that ended on an error: the engine's is_current)
+        return row.get("tau_max") is not None
 
     def scene(self, point: Point, plan: Plan, threads: int) -> Any:
         from granflow.scenes.cell import ShearCell

@@ -74,7 +74,7 @@ def point_of(cls: type, row: Mapping[str, Any]) -> Any:
 
 def done_keys(out: Path, cls: type, study: Study | None = None) -> set[str]:
     """Keys of the points already in ``out/points.parquet`` (with ``study``: those whose row
-    counts as done, :meth:`Study.current`)."""
+    counts as done, :func:`is_current`)."""
     f = out / "points.parquet"
     return keys_done(pl.read_parquet(f), cls, study) if f.exists() else set()
 
@@ -82,7 +82,14 @@ def done_keys(out: Path, cls: type, study: Study | None = None) -> set[str]:
 def keys_done(points: pl.DataFrame, cls: type, study: Study | None = None) -> set[str]:
     """:func:`done_keys` of a points table already read."""
     return {point_of(cls, r).key for r in points.iter_rows(named=True)
-            if study is None or study.current(r)}
+            if study is None or is_current(study, r)}
+
+
+def is_current(study: Study, row: Mapping[str, Any]) -> bool:
+    """Whether a finished ``row`` counts as done: one that ended on an error (ERROR_STATES)
+    always (no stop rule judged it, under any rule, and its row carries none of the rule's
+    fields), else :meth:`Study.current`."""
+    return row.get("state") in ERROR_STATES or study.current(row)
 
 
 def drop_key(f: Path, cls: type, key: str) -> None:
@@ -168,8 +175,13 @@ class Study:
     def current(self, row: Mapping[str, Any]) -> bool:
         """Whether a finished ``row`` of the dataset counts as done: judged by the present
         stop rule. One that does not (written before the rule) is run again, and the new row
-        replaces it (:func:`run_points`)."""
+        replaces it (:func:`run_points`). Rows that ended on an error are done whatever this
+        says (:func:`is_current`)."""
         return True
+
+
+#: the states of points that ended on an error (:func:`error_state`)
+ERROR_STATES = ("runaway", "failed")
 
 
 def error_state(exc: GranflowError) -> str:
@@ -269,7 +281,7 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
     for old in pl.read_parquet(outp / "points.parquet").iter_rows(named=True):
         point = point_of(cls, old)
         d = outp / "work" / point.key
-        if not (d / "meta.json").exists() or old["state"] in ("runaway", "failed"):
+        if not (d / "meta.json").exists() or old["state"] in ERROR_STATES:
             keep.append(old)
             for k in study.tables:
                 extra[k] += old_rows[k].get(point.key, [])
@@ -318,7 +330,7 @@ def add_final_rows(study: Study, cls: type, plan: Any, out: str | os.PathLike[st
     for old in pl.read_parquet(f).iter_rows(named=True):
         point = point_of(cls, old)
         ck = outp / "work" / point.key / "checkpoint.gfck"
-        if old["state"] in ("runaway", "failed") or not ck.exists():
+        if old["state"] in ERROR_STATES or not ck.exists():
             continue
         missing = [k for k in study.final_tables if point.key not in have[k]]
         if not missing:
@@ -352,7 +364,7 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
                log: Callable[[str], Any] = print, name: str = "campaign") -> pl.DataFrame:
     """Run (:func:`run_point`) the ``points`` not yet done in ``out/points.parquet`` (local
     process pool by default, or a Dask scheduler): those it lacks, and those whose row is not
-    :meth:`Study.current` (the new row replaces the old, in every table); each finished row is
+    :func:`is_current` (the new row replaces the old, in every table); each finished row is
     appended there at once, and the
     list of rows under each key ``k`` of ``study.tables`` to ``out/<study.tables[k]>.parquet``.
     ``threads`` per point (default cores/workers; :func:`granflow.study.map_tasks`).
