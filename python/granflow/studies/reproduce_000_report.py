@@ -1,7 +1,8 @@
 """The report of the 000 campaign (:mod:`granflow.studies.reproduce_000`): the fig. 5 numbers
 against W and phi_bar beside the paper's statements, figures 4-10, the stiffness test per
 zone, error against run time, the coverage audit, the cost of each piece and the paper-scale
-recipe (sections in their own modules: reproduce_000_report_cost, _creep, _order).
+recipe (sections in their own modules: reproduce_000_report_cost, _creep, _order; the
+figures drawn by reproduce_000_figures).
 
 Error rules: a point's value is the mean of its steady, stationary replicas with the
 larger of the within-run and between-replica SEs (:func:`granflow.analysis.replicas.replica_mean`,
@@ -11,17 +12,16 @@ drifting points are listed and left out of the tables and fits."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import polars as pl
 
-from granflow.analysis.channel import L_C_PAPER, PHI_AD, PHI_RCP, fit_phi_ad, scaled_profile_31
+from granflow.analysis.channel import L_C_PAPER, fit_phi_ad
 from granflow.analysis.compare import AGREE_SIGMA, agrees, difference_z, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
-from granflow.analysis.plots import save_figure
 from granflow.analysis.replicas import mean_profiles as replica_profiles
 from granflow.analysis.replicas import replica_mean
 from granflow.analysis.rheology import pool_realizations
@@ -32,6 +32,14 @@ from ._campaign import (
     md_table,
     plot_campaign_se,
     pm,
+)
+from .reproduce_000_figures import (
+    KINETIC,
+    plot_fig4,
+    plot_fig5,
+    plot_fig7,
+    plot_fig13,
+    plot_profiles,
 )
 from .reproduce_000_report_cost import cost_section, remaining
 from .reproduce_000_report_creep import creep_lines
@@ -50,7 +58,6 @@ NED = "not enough data"
 PLUG_QUANTITIES = ("xi_plug", "phi_plug", "l_c")
 #: a difference is significant beyond this many combined SEs; consistent within AGREE
 SIGNIFICANT, AGREE = 3.0, 2.0
-MARKERS = {0.59: "D", 0.6: "v", 0.61: "^", 0.62: "o"}
 
 
 #: the reported quantities (columns of points.parquet, each with its ``_se``): the value of a
@@ -177,7 +184,7 @@ def _se_note(r: dict[str, Any]) -> str:
     return f"{k} replica{'s' if k > 1 else ''}, ≥ {nb} blocks"
 
 
-def _with_scaled(d: pl.DataFrame) -> pl.DataFrame:
+def with_scaled(d: pl.DataFrame) -> pl.DataFrame:
     """u_slip/sqrt(W), u_max/sqrt(W), delta_095/W and sigma_xx/W with their SEs."""
     out = d
     for col, scale in (("u_slip", pl.col("W").sqrt()), ("u_max", pl.col("W").sqrt()),
@@ -189,7 +196,7 @@ def _with_scaled(d: pl.DataFrame) -> pl.DataFrame:
 
 def fig5_table(steady: pl.DataFrame) -> pl.DataFrame:
     """One row per steady point: the section 3.1 numbers, each ``value ± SE``."""
-    d = _with_scaled(steady)
+    d = with_scaled(steady)
     cols = (("u_slip", 2), ("u_max", 2), ("u_max_over_u_slip", 3), ("delta_095", 2),
             ("u_slip_scaled", 3), ("u_max_scaled", 3), ("delta_095_scaled", 3),
             ("mean_velocity_ratio", 4), ("wall_friction", 3))
@@ -272,7 +279,7 @@ def collapse(steady: pl.DataFrame) -> pl.DataFrame:
     steady flow, their relative change and its distance from zero in SEs; and the exponent n
     of u ~ W^n (delta ~ W^n) between them, with its SE (000: u ~ W^1/2 and delta ~ W for
     W >= 100; a local mu(I) law, Cawthorn 2011 quoted in 000 §3.1: u ~ W^3/2)."""
-    d = _with_scaled(steady)
+    d = with_scaled(steady)
     rows = []
     for (phi,), g in d.group_by(["phi_bar"], maintain_order=True):
         g = g.sort("W")
@@ -327,50 +334,30 @@ def zone_table(steady: pl.DataFrame) -> pl.DataFrame:
     return pl.DataFrame(rows)
 
 
-#: the kinetic coefficients of fig. 13 (B8-B10), column and label
-KINETIC = (("p_phi", "p_φ = σxx/T (B8)"), ("mu_phi", "μ_φ = σxy/(|du/dx| T^1/2) (B9)"),
-           ("D_phi", "D_φ = Γ/T^3/2 (B10)"))
 #: 000 §3.2 (fig. 13): the divergence fits give phi_ad = 0.59 +- 0.002
 PHI_AD_PAPER = (0.59, 0.002)
+
+
+def _kinetic_fits(profiles: pl.DataFrame) -> list[tuple[str, dict[str, float]]]:
+    """Each kinetic coefficient's label and fit_phi_ad over the loose-zone bins of the
+    unbranched points in ``profiles``."""
+    loose = profiles.filter(pl.col("zone") == "loose", pl.col("parent") == "")
+    return [(name, fit_phi_ad(loose["phi"].to_numpy(), loose[col].to_numpy(),
+                              loose[f"{col}_se"].to_numpy())) for col, name in KINETIC]
 
 
 def phi_ad_fits(profiles: pl.DataFrame) -> pl.DataFrame:
     """Fit A/(phi_ad - phi) (granflow.analysis.channel.fit_phi_ad) to each kinetic coefficient
     over the loose-zone bins of every steady k_n = 1e5 point (pass only those), pooled
     (fig. 13); the fit needs each bin's SE (fewer than three bins with one: NaN)."""
-    loose = profiles.filter(pl.col("zone") == "loose", pl.col("parent") == "")
     rows = []
-    for col, name in KINETIC:
-        f = fit_phi_ad(loose["phi"].to_numpy(), loose[col].to_numpy(),
-                       loose[f"{col}_se"].to_numpy())
+    for name, f in _kinetic_fits(profiles):
         rows.append({"coefficient": name, "bins with an SE": f["n"],
                      "φ_ad": pm(f["phi_ad"], f["phi_ad_se"], 4) if math.isfinite(f["phi_ad"])
                      else NED, "χ²/dof": f["chi2_per_dof"],
                      "from 0.59 ± 0.002 (SEs)": (f["phi_ad"] - PHI_AD_PAPER[0])
                      / math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1])})
     return pl.DataFrame(rows)
-
-
-def plot_fig13(profiles: pl.DataFrame, path: Path) -> Path:
-    """The kinetic coefficients against 0.64 - phi, by zone, all steady k_n = 1e5 points."""
-    from matplotlib.figure import Figure
-
-    d = profiles.filter(pl.col("parent") == "")
-    fig = Figure(figsize=(12, 3.8))
-    colours = {"dense": "k", "loose": "tab:brown", "wall": "r", "plug": "0.6"}
-    for k, (col, name) in enumerate(KINETIC):
-        ax = fig.add_subplot(1, 3, k + 1)
-        for zone, c in colours.items():
-            z = d.filter(pl.col("zone") == zone, pl.col(col) > 0)
-            ax.plot(PHI_RCP - z["phi"], z[col], "o", ms=3, color=c, label=f"{zone} zone")
-        ax.axvline(PHI_RCP - PHI_AD, color="b", ls=":", lw=0.8, label=f"φ = φ_ad = {PHI_AD}")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("0.64 - φ")
-        ax.set_ylabel(name)
-        ax.set_title(f"fig. 13: {col}")
-        ax.legend(fontsize=6)
-    return save_figure(fig, path, dpi=100)
 
 
 # --------------------------------------------------------------------------------------------
@@ -475,158 +462,11 @@ def stiffness_verdict(tab: pl.DataFrame) -> list[str]:
     return out
 
 
-# --------------------------------------------------------------------------------------------
-# figures
-# --------------------------------------------------------------------------------------------
-def _lbl(r: dict[str, Any]) -> str:
-    return f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}"
-
-
-def plot_fig4(steady: pl.DataFrame, profiles: pl.DataFrame, path: Path) -> Path:
-    """(a) u against the distance from the wall; (b) the scaled profile against
-    x/delta_0.95 with (3.1)."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(11, 4))
-    a, b = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    for r in steady.iter_rows(named=True):
-        p = profiles.filter(*(pl.col(k) == r[k] for k in POINT_BY))
-        if p.height == 0:
-            continue
-        mk = MARKERS.get(round(r["phi_bar"], 2), "o")
-        a.errorbar(p["xi"], p["u"], yerr=p["u_se"], fmt=mk + "-", ms=3, lw=0.8, label=_lbl(r))
-        s = (p["u"] - r["u_slip"]) / (r["u_max"] - r["u_slip"])
-        b.plot(p["xi"] / r["delta_095"], s, mk, ms=3, label=_lbl(r))
-    x = np.linspace(0, 3, 200)
-    b.plot(x, scaled_profile_31(x, 1.0), "r--", label="000 (3.1): 1 - exp(-3x/δ0.95)")
-    a.set_xlabel("distance from the wall x/d")
-    a.set_ylabel("u (√(gd))")
-    a.set_title("fig. 4(a): velocity")
-    b.set_xlabel("x/δ0.95")
-    b.set_ylabel("(u - u_slip)/(u_max - u_slip)")
-    b.set_xlim(0, 3)
-    b.set_title("fig. 4(b): scaled velocity")
-    a.legend(fontsize=6)
-    b.legend(fontsize=6)
-    return save_figure(fig, path, dpi=100)
-
-
-def plot_fig5(steady: pl.DataFrame, path: Path) -> Path:
-    """u_slip/sqrt(W), u_max/sqrt(W), u_max/u_slip (with 000's 1.37-1.40) and delta_095/W
-    against phi_bar, a line per W."""
-    from matplotlib.figure import Figure
-
-    d = _with_scaled(steady)
-    fig = Figure(figsize=(12, 3.6))
-    panels = (("u_slip_scaled", "u_slip/√W"), ("u_max_scaled", "u_max/√W"),
-              ("u_max_over_u_slip", "u_max/u_slip"), ("delta_095_scaled", "δ0.95/W"))
-    for k, (col, name) in enumerate(panels):
-        ax = fig.add_subplot(1, 4, k + 1)
-        for (w,), g in d.group_by(["W"], maintain_order=True):
-            ax.errorbar(g["phi_bar"], g[col], yerr=g[f"{col}_se"], fmt="o-", ms=4,
-                        capsize=2, label=f"W = {w:g} (granflow, B = {g['B'][0]:g})")
-        if col == "u_max_over_u_slip":
-            ax.axhspan(*RATIO_PAPER, color="r", alpha=0.2, label="000: 1.37-1.40 (W = 60-150)")
-        ax.set_xlabel("φ̄")
-        ax.set_ylabel(name)
-        ax.set_title(f"fig. 5: {name}")
-        ax.legend(fontsize=6)
-    return save_figure(fig, path, dpi=100)
-
-
-def plot_fig7(steady: pl.DataFrame, path: Path) -> Path:
-    """sigma_xx/W and the wall friction coefficient against phi_bar, a line per W."""
-    from matplotlib.figure import Figure
-
-    d = _with_scaled(steady)
-    fig = Figure(figsize=(9, 3.6))
-    for k, (col, name) in enumerate((("sigma_xx_mean_scaled", "σxx/W (ρ g)"),
-                                     ("wall_friction", "μ_wall"))):
-        ax = fig.add_subplot(1, 2, k + 1)
-        for (w,), g in d.group_by(["W"], maintain_order=True):
-            ax.errorbar(g["phi_bar"], g[col], yerr=g[f"{col}_se"], fmt="o-", ms=4, capsize=2,
-                        label=f"W = {w:g}")
-        ax.set_xlabel("φ̄")
-        ax.set_ylabel(name)
-        ax.set_title(f"fig. 7: {name}")
-        ax.legend(fontsize=7)
-    return save_figure(fig, path, dpi=100)
-
-
 def mean_profiles(profiles: pl.DataFrame) -> pl.DataFrame:
     """The half profiles of each point (POINT_BY) over its replicas (pass the steady ones):
     per bin ``xi`` every profile quantity's replica mean and SE
     (granflow.analysis.replicas.mean_profiles)."""
     return replica_profiles(profiles, POINT_BY)
-
-
-#: bins whose |du/dx| is below this fraction of the largest set no y-range of the panels named
-#: in plot_profiles' ``shear_only`` (there Omega_z/(du/dx) is 0/0: +-8000 in the plug)
-SHEAR_RANGE_FRACTION = 0.01
-
-
-def plot_profiles(rows: pl.DataFrame, profiles: pl.DataFrame, path: Path, title: str,
-                  panels: Sequence[tuple[str, str, bool]], label: Any = _lbl,
-                  shear_only: Sequence[str] = (),
-                  refs: Mapping[str, tuple[float, str]] | None = None) -> Path:
-    """Half profiles of ``rows`` (one line each, error bars; ``profiles`` as
-    :func:`mean_profiles` gives them), a panel per (column, axis label, log scale); the zone
-    boundaries of each row as dotted lines (plug: black, phi_ad: blue, wall: red). The panels
-    of ``shear_only`` take their y-range from the sheared bins (|du/dx| at least
-    SHEAR_RANGE_FRACTION of its largest); ``refs`` draws a horizontal line (value, label) in
-    a column's panel."""
-    from matplotlib.figure import Figure
-
-    refs = refs or {}
-    yr: dict[str, list[float]] = {c: [] for c in shear_only}
-
-    fig = Figure(figsize=(3.4 * len(panels), 3.6))
-    axes = [fig.add_subplot(1, len(panels), k + 1) for k in range(len(panels))]
-    for r in rows.iter_rows(named=True):
-        p = profiles.filter(*(pl.col(k) == r[k] for k in POINT_BY))
-        if p.height == 0:
-            continue
-        for ax, (col, name, log) in zip(axes, panels, strict=True):
-            y, e = p[col].to_numpy(), p[f"{col}_se"].to_numpy()
-            if col == "gamma_dot":
-                y = np.abs(y)
-            yerr: Any = e
-            if log:  # positive values only; a lower bar reaching zero is cut at y/10
-                y = np.where(y > 0, y, np.nan)
-                yerr = np.vstack([np.minimum(e, 0.9 * y), e])
-            with np.errstate(under="ignore"):
-                ax.errorbar(p["xi"], y, yerr=yerr, fmt=".-", ms=3, lw=0.8, label=label(r))
-                if log:
-                    ax.set_yscale("log")
-            if col in yr:
-                g = np.abs(p["gamma_dot"].to_numpy())
-                sheared = g >= SHEAR_RANGE_FRACTION * np.nanmax(g)
-                yr[col] += [float(v) for v in y[sheared] if math.isfinite(v)]
-            ax.set_xlabel("distance from the wall x/d")
-            ax.set_ylabel(name)
-    for ax, (col, _, _) in zip(axes, panels, strict=True):
-        if yr.get(col):
-            vals = yr[col] + ([refs[col][0]] if col in refs else [])
-            lo, hi = min(vals), max(vals)
-            pad = 0.1 * (hi - lo) if hi > lo else 0.5
-            ax.set_ylim(lo - pad, hi + pad)
-        if col in refs:
-            v, name = refs[col]
-            ax.axhline(v, color="g", ls="--", lw=0.8, label=name)
-            ax.legend(fontsize=6)
-    for ax in axes:
-        lo, hi = ax.get_ylim()
-        for r in rows.iter_rows(named=True):
-            for x, c in ((r.get("xi_plug"), "k"), (r.get("xi_ad"), "b"), (r.get("xi_wall"), "r")):
-                if x is not None and math.isfinite(x):
-                    ax.axvline(x, color=c, ls=":", lw=0.6)
-        ax.set_ylim(lo, hi)
-    axes[0].plot([], [], "k:", label="plug edge")
-    axes[0].plot([], [], "b:", label=f"φ = φ_ad = {PHI_AD}")
-    axes[0].plot([], [], "r:", label="wall zone")
-    axes[0].legend(fontsize=6)
-    fig.suptitle(title, fontsize=9)
-    return save_figure(fig, path, dpi=100)
 
 
 # --------------------------------------------------------------------------------------------
@@ -729,9 +569,9 @@ def _drift_line(points: pl.DataFrame) -> str:
 
 
 def _fig5_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) -> Section:
-    figs = [plot_fig4(steady, profiles, figdir / "fig4_velocity.png"),
-            plot_fig5(steady, figdir / "fig5_scaling.png"),
-            plot_fig7(steady, figdir / "fig7_stress_wall_friction.png")]
+    figs = [plot_fig4(steady, profiles, POINT_BY, figdir / "fig4_velocity.png"),
+            plot_fig5(with_scaled(steady), figdir / "fig5_scaling.png", RATIO_PAPER),
+            plot_fig7(with_scaled(steady), figdir / "fig7_stress_wall_friction.png")]
     lines = ["## Fig. 5: velocity scaling against W and φ̄", "",
              md_table(fig5_table(steady)), "",
              "Each value is the mean over a point's steady replicas; its SE the larger of the "
@@ -782,16 +622,17 @@ def _zones_section(steady: pl.DataFrame, profiles: pl.DataFrame, means: pl.DataF
     w = f"W = {wide['W'][0]:g}"
     # units: lengths d, velocities √(gd), stresses ρ_p g d (granflow.analysis.channel_profiles)
     figs = [plot_fig13(profiles, figdir / "fig13_kinetic.png"),
-            plot_profiles(wide, means, figdir / "fig6_stress.png", f"fig. 6: stresses, {w}",
+            plot_profiles(wide, means, POINT_BY, figdir / "fig6_stress.png",
+                          f"fig. 6: stresses, {w}",
                           (("sigma_xx", "σxx (ρ_p g d)", False),
                            ("sigma_xy", "σxy (ρ_p g d)", False))),
-            plot_profiles(wide, means, figdir / "fig8_profiles.png",
+            plot_profiles(wide, means, POINT_BY, figdir / "fig8_profiles.png",
                           f"fig. 8: φ, |du/dx|, T, production, dissipation, {w}",
                           (("phi", "φ", False), ("gamma_dot", "|du/dx| (√(g/d))", True),
                            ("T", "T (g d)", True),
                            ("production", "σxy du/dx (ρ_p g^3/2 d^1/2)", True),
                            ("Gamma", "dissipation Γ (ρ_p g^3/2 d^1/2)", True))),
-            plot_profiles(wide, means, figdir / "fig9_rotation.png",
+            plot_profiles(wide, means, POINT_BY, figdir / "fig9_rotation.png",
                           f"fig. 9: Ω_z/ω_z and (du/dx)/√T, {w} (y-range: sheared bins)",
                           (("omega_ratio", "Ω_z/ω_z", False),
                            ("gamma_over_sqrtT", "|du/dx| d/√T", False)),
@@ -810,7 +651,7 @@ def _stiffness_section(points: pl.DataFrame, values: pl.DataFrame, profiles: pl.
         return ["## Stiffness (fig. 10)", "", *stiffness_verdict(tab), ""], []
     fam = values.filter(pl.col("W") == branches["W"][0],
                         pl.col("phi_bar") == branches["phi_bar"][0]).sort("kn")
-    fig = plot_profiles(fam, means, figdir / "fig10_stiffness.png",
+    fig = plot_profiles(fam, means, POINT_BY, figdir / "fig10_stiffness.png",
                         f"fig. 10: k_n, W = {fam['W'][0]:g}, φ̄ = {fam['phi_bar'][0]:g}",
                         (("phi", "φ", False), ("u", "u", False),
                          ("gamma_dot", "|du/dx|", True), ("T", "T", True)),
@@ -1070,13 +911,8 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         add("μ_wall independent of W", "independent of W (fig. 7b)", "-",
             "cannot tell at this scale", scale_why + " (two steady widths >= 60 needed)")
     if profiles is not None and profiles.height:
-        fits = []
-        loose = profiles.filter(pl.col("zone") == "loose", pl.col("parent") == "")
-        for col, name in KINETIC:
-            f = fit_phi_ad(loose["phi"].to_numpy(), loose[col].to_numpy(),
-                           loose[f"{col}_se"].to_numpy())
-            fits.append((name.split(" ")[0], f["phi_ad"],
-                         math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1])))
+        fits = [(name.split(" ")[0], f["phi_ad"], math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1]))
+                for name, f in _kinetic_fits(profiles)]
         judged = [(n, v, e, *_judge(v, e, PHI_AD_PAPER[0], PHI_AD_PAPER[0]))
                   for n, v, e in fits]
         verdict = ("does not hold" if any(j[3] == "does not hold" for j in judged)

@@ -21,6 +21,7 @@ from granflow.analysis.replicas import DISAGREE_P, replica_mean
 from granflow.analysis.stats import weighted_mean
 
 from ._campaign import (
+    ERROR_STATES,
     cost,
     dask_recipe,
     keys_done,
@@ -927,7 +928,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
             .alias("dphi / error"))
         lines += ["## Size effect (N = 10,000 against N = 2000)", "",
                   md_table(size, {"dI / error": ".1f", "dphi / error": ".1f"}), ""]
-    gone = points.filter(pl.col("state").is_in(["runaway", "failed"]))
+    gone = points.filter(pl.col("state").is_in(ERROR_STATES))
     if gone.height:
         lines += ["## Ratios without a steady state", "",
                   "Above these ratios the cell dilates until the kernel's guard (20-fold "

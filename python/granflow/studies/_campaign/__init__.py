@@ -12,6 +12,7 @@ checkpoints under ``OUT/work/``.
 
 from .command import cli
 from .engine import (
+    ERROR_STATES,
     Study,
     add_final_rows,
     done_keys,
@@ -36,7 +37,7 @@ from .report import (
     run_seconds,
 )
 
-__all__ = ["Study", "add_final_rows", "cli", "core_seconds", "cost", "dask_recipe", "done_keys",
-           "error_state", "fmt", "keys_done", "md_table", "paper_scale_estimate",
-           "plot_campaign_se", "pm", "pm_column", "point_of", "reanalyse", "run_point",
-           "run_points", "run_seconds", "write_rows"]
+__all__ = ["ERROR_STATES", "Study", "add_final_rows", "cli", "core_seconds", "cost",
+           "dask_recipe", "done_keys", "error_state", "fmt", "keys_done", "md_table",
+           "paper_scale_estimate", "plot_campaign_se", "pm", "pm_column", "point_of",
+           "reanalyse", "run_point", "run_points", "run_seconds", "write_rows"]
