@@ -603,3 +603,32 @@ def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points(
     assert "the replicas of W = 20, φ̄ = 0.6 stopped apart" in text
     assert creep_lines(pl.DataFrame([{k: v for k, v in r.items() if "creep" not in k}
                                      for r in rows]), POINT_BY) == []
+
+
+def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
+    from granflow.studies.reproduce_000_report import _se_note, audit_factors, point_values
+
+    def run(W: float, seed: int, u: float, ratio: float) -> dict[str, Any]:
+        return {"W": W, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "seed": seed,
+                "parent": "", "state": "steady", "n_blocks": 20, "xi_plug": 5.0,
+                "xi_wall": 1.0, "l_c_at_bound": False, "u_slip": u, "u_slip_se": 0.1,
+                "u_max_over_u_slip": ratio, "u_max_over_u_slip_se": 0.01}
+
+    # W = 20: three replicas whose u_slip spread far beyond their SEs (pairs differ by 0.5,
+    # 1.0 and 0.5 against a combined SE of 0.1414: rms z 5.0) but whose ratios agree
+    narrow = [run(20.0, 1, 7.0, 1.28), run(20.0, 2, 7.5, 1.29), run(20.0, 3, 8.0, 1.28)]
+    points = pl.DataFrame([*narrow, run(40.0, 1, 20.0, 1.33)])
+    f = audit_factors(points)
+    assert set(f) == {"u_slip"} and f["u_slip"] == pytest.approx(5.0)
+    v = point_values(points, f).sort("W")
+    one, three = v.row(1, named=True), v.row(0, named=True)
+    # the one-replica point's u_slip SE carries the shortfall; its ratio (audited honest) not
+    assert one["u_slip_se"] == pytest.approx(0.1 * f["u_slip"])
+    assert one["u_slip_se_within"] == pytest.approx(0.1)
+    assert one["u_max_over_u_slip_se"] == pytest.approx(0.01)
+    assert one["audit_scaled"] and "run SEs × the audit's rms z" in _se_note(one)
+    # the replicated point keeps the larger of its within and between SEs
+    assert three["u_slip_se"] == pytest.approx(point_values(points).sort("W")["u_slip_se"][0])
+    assert not three["audit_scaled"] and "audit" not in _se_note(three)
+    # without pairs (one replica everywhere) nothing is scaled
+    assert audit_factors(points.filter(pl.col("seed") == 1)) == {}

@@ -12,7 +12,7 @@ drifting points are listed and left out of the tables and fits."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -97,18 +97,39 @@ def drifting(points: pl.DataFrame) -> pl.DataFrame:
     return points.filter(pl.col("state") == FlowState.DRIFTING.value)
 
 
-def point_values(points: pl.DataFrame) -> pl.DataFrame:
+def audit_factors(points: pl.DataFrame) -> dict[str, float]:
+    """Per audited quantity whose run SEs the coverage audit of ``points`` finds too small
+    (:func:`coverage_table`: the 95 % interval of rms z above 1), that rms z: the factor by
+    which a run's SE falls short of the spread between its replicas."""
+    tab = coverage_table(points) if points.height else pl.DataFrame()
+    return {r["observable"]: float(r["rms_z"]) for r in tab.iter_rows(named=True)
+            if r["pairs"] > 0 and r["rms_z_lo"] > 1}
+
+
+def point_values(points: pl.DataFrame,
+                 factors: Mapping[str, float] | None = None) -> pl.DataFrame:
     """One row per point (POINT_BY; ``branch``: a stiffness branch) from its steady replicas:
     every ``X`` with ``X_se`` as their mean with ``X_se``, ``X_se_within`` and
     ``X_se_between`` (:func:`granflow.analysis.replicas.replica_mean`; NaN where a replica has
     no SE), ``replicas``, ``n_blocks`` the fewest blocks of a replica, and the zone boundaries
-    without an SE (xi_plug, xi_wall) as the replicas' mean."""
+    without an SE (xi_plug, xi_wall) as the replicas' mean.
+
+    ``factors`` (:func:`audit_factors`): a point with one replica has no between-replica SE
+    to fall back on, so its ``X_se`` is its run SE times ``factors[X]`` (``audit_scaled``:
+    True); ``X_se_within`` stays the run's own. That carries the audit of the points with
+    replicas over to it: an assumption (a run's SE falling short by the same factor at
+    another width), stated where the report uses it."""
     d = steady_rows(points)
     if not d.height:
         return pl.DataFrame()
     obs = [c for c in d.columns if f"{c}_se" in d.columns and c not in POINT_BY]
     rm = replica_mean(d.with_columns(*(pl.col(c).cast(pl.Float64) for c in
                                        (*obs, *(f"{o}_se" for o in obs)))), POINT_BY, obs)
+    scale = {o: f for o, f in (factors or {}).items() if o in obs}
+    one = pl.col("replicas") == 1
+    rm = rm.with_columns(*(pl.when(one).then(pl.col(f"{o}_se") * f).otherwise(
+        pl.col(f"{o}_se")).alias(f"{o}_se") for o, f in scale.items()),
+        (one & pl.lit(bool(scale))).alias("audit_scaled"))
     extra = d.group_by(list(POINT_BY)).agg(
         pl.col("n_blocks").min(), pl.col("xi_plug").mean(), pl.col("xi_wall").mean(),
         pl.col("l_c_at_bound").any(), (pl.col("parent").str.len_chars() > 0).any().alias(
@@ -181,7 +202,8 @@ def _se_note(r: dict[str, Any]) -> str:
     k = r.get("replicas", 1)
     if nb is None or nb < MIN_SE_BLOCKS:
         return f"{NED} ({nb} blocks)"
-    return f"{k} replica{'s' if k > 1 else ''}, ≥ {nb} blocks"
+    return (f"{k} replica{'s' if k > 1 else ''}, ≥ {nb} blocks"
+            + (", run SEs × the audit's rms z" if r.get("audit_scaled") else ""))
 
 
 def with_scaled(d: pl.DataFrame) -> pl.DataFrame:
@@ -577,7 +599,8 @@ def _fig5_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) ->
              "Each value is the mean over a point's steady replicas; its SE the larger of the "
              "SE within runs and the SE between replicas (granflow.analysis.replicas."
              "replica_mean), both below (within / between; `-`: one replica, or "
-             f"{NED}):", "",
+             f"{NED}); with one replica, its run SE times the coverage audit's rms z where "
+             "the audit finds the run SEs too small (the SEs column says so):", "",
              md_table(se_parts_table(steady)), "",
              "u_max/u_slip per width (000: 1.37-1.40 for W = 60-150 and every φ̄):", "",
              md_table(ratio_by_width(steady), {"below 1.37 by": ".3f", "in SEs": ".1f"}), ""]
@@ -760,7 +783,10 @@ def coverage_verdicts(tab: pl.DataFrame) -> list[str]:
                    "or each run's own preparation (φ plug, which no shear rearranges once the "
                    "plug has formed, is among them). The points' SEs above are the larger of "
                    "the within-run and between-replica ones, so there they rest on the "
-                   "replicas' spread.")
+                   "replicas' spread; a point with one replica has no spread to rest on, so "
+                   "its SEs of these quantities are its run SEs times that rms z (an "
+                   "assumption: that its run falls short by as much as the replicated "
+                   "points' runs do).")
     if large:
         out.append("The run SEs are too large for " + ", ".join(large) + ".")
     if fine:
@@ -1067,7 +1093,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     points = refuse_few_blocks(raw) if raw.height else raw
     profiles = _of_steady(points, refuse_few_blocks(raw, _read(out, "profiles")))
     zones = _of_steady(points, refuse_few_blocks(raw, _read(out, "zones")))
-    every_depth = point_values(points) if points.height else pl.DataFrame()
+    every_depth = point_values(points, audit_factors(points)) if points.height \
+        else pl.DataFrame()
     values = main_depth(every_depth)
     steady = _steady(values).filter(~pl.col("branch")) if values.height else values
     means = mean_profiles(profiles)
