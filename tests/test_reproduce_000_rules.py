@@ -632,3 +632,21 @@ def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
     assert not three["audit_scaled"] and "audit" not in _se_note(three)
     # without pairs (one replica everywhere) nothing is scaled
     assert audit_factors(points.filter(pl.col("seed") == 1)) == {}
+
+
+def test_a_run_that_never_settles_is_named_with_its_trend():
+    from granflow.studies.reproduce_000_report import unsettled_lines
+
+    base = {"phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "", "t_end": 3200.0}
+    flow = pl.DataFrame([{**base, "W": 150.0, "seed": 1, "state": "accelerating",
+                          "rel_drift": 0.031},
+                         {**base, "W": 40.0, "seed": 2, "state": "decelerating",
+                          "rel_drift": -0.012},
+                         {**base, "W": 20.0, "seed": 1, "state": "steady", "rel_drift": 0.001}])
+    lines = unsettled_lines(flow)
+    assert lines == [
+        "- W = 40, φ̄ = 0.6, seed 2: still decelerating at t = 3200, |v_cm| -1.2% over its "
+        "last half (t = 1600-3200): no steady value, so in no table, fit or verdict.",
+        "- W = 150, φ̄ = 0.6, seed 1: still accelerating at t = 3200, |v_cm| +3.1% over its "
+        "last half (t = 1600-3200): no steady value, so in no table, fit or verdict."]
+    assert unsettled_lines(flow.filter(pl.col("state") == "steady")) == []

@@ -983,6 +983,23 @@ def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
             + ", ".join(f"{k}: {n}" for k, n in count.items()) + ".", "", md_table(tab), ""]
 
 
+#: the states of a run whose flow still speeds up or slows down (flow_state's trend test)
+MOVING = (FlowState.ACCELERATING.value, FlowState.DECELERATING.value)
+
+
+def unsettled_lines(flow: pl.DataFrame) -> list[str]:
+    """A line per run of ``flow`` whose last state is accelerating or decelerating: how much
+    |v_cm| changed over the last half of the run (``rel_drift``, the trend over that half),
+    since such a run has no steady value and so is in no table, fit or verdict."""
+    if not flow.height or "rel_drift" not in flow.columns:
+        return []
+    moving = flow.filter(pl.col("state").is_in(MOVING)).sort("W", "phi_bar", "seed")
+    return [f"- W = {r['W']:g}, φ̄ = {r['phi_bar']:g}, seed {r['seed']}: still {r['state']} "
+            f"at t = {r['t_end']:.0f}, |v_cm| {r['rel_drift']:+.1%} over its last half "
+            f"(t = {r['t_end'] / 2:.0f}-{r['t_end']:.0f}): no steady value, so in no table, "
+            "fit or verdict." for r in moving.iter_rows(named=True)]
+
+
 def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     """The answers to the paper's claims, in words, from the tables below (``values``:
     :func:`point_values`)."""
@@ -997,6 +1014,7 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
             for (p,), h in g.group_by(["phi_bar"], maintain_order=True))
         out.append(f"- W = {w:g}: {states} (000, W = 60-150: steady for φ̄ = 0.59-0.61, "
                    "fluctuating at 0.62, jammed above).")
+    out += unsettled_lines(flow)
     ratios = ratio_by_width(steady) if steady.height else pl.DataFrame()
     for r in ratios.iter_rows(named=True):
         out.append(f"- u_max/u_slip at W = {r['W']:g}: {r['u_max/u_slip']} (φ̄ = "
