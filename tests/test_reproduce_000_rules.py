@@ -606,7 +606,12 @@ def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points(
 
 
 def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
-    from granflow.studies.reproduce_000_report import _se_note, audit_factors, point_values
+    from granflow.studies.reproduce_000_report import (
+        _se_note,
+        audit_factors,
+        coverage_table,
+        point_values,
+    )
 
     def run(W: float, seed: int, u: float, ratio: float) -> dict[str, Any]:
         return {"W": W, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "seed": seed,
@@ -618,7 +623,7 @@ def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
     # 1.0 and 0.5 against a combined SE of 0.1414: rms z 5.0) but whose ratios agree
     narrow = [run(20.0, 1, 7.0, 1.28), run(20.0, 2, 7.5, 1.29), run(20.0, 3, 8.0, 1.28)]
     points = pl.DataFrame([*narrow, run(40.0, 1, 20.0, 1.33)])
-    f = audit_factors(points)
+    f = audit_factors(coverage_table(points))
     assert set(f) == {"u_slip"} and f["u_slip"] == pytest.approx(5.0)
     v = point_values(points, f).sort("W")
     one, three = v.row(1, named=True), v.row(0, named=True)
@@ -631,7 +636,7 @@ def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
     assert three["u_slip_se"] == pytest.approx(point_values(points).sort("W")["u_slip_se"][0])
     assert not three["audit_scaled"] and "audit" not in _se_note(three)
     # without pairs (one replica everywhere) nothing is scaled
-    assert audit_factors(points.filter(pl.col("seed") == 1)) == {}
+    assert audit_factors(coverage_table(points.filter(pl.col("seed") == 1))) == {}
 
 
 def test_a_run_that_never_settles_is_named_with_its_trend():

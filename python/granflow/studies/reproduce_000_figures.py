@@ -1,4 +1,4 @@
-"""The 000 campaign's figures (figs 4-9 and 13 of 000), drawn from the report's tables
+"""The 000 campaign's figures (figs 4-10 and 13 of 000), drawn from the report's tables
 (:mod:`granflow.studies.reproduce_000_report`): steady points, one row each with the
 section 3.1 numbers, and their replica-mean half profiles."""
 
@@ -45,6 +45,7 @@ def plot_fig13(profiles: pl.DataFrame, path: Path) -> Path:
 
 
 def label_point(r: dict[str, Any]) -> str:
+    """A point's legend label: its W and phi_bar."""
     return f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}"
 
 

@@ -97,11 +97,10 @@ def drifting(points: pl.DataFrame) -> pl.DataFrame:
     return points.filter(pl.col("state") == FlowState.DRIFTING.value)
 
 
-def audit_factors(points: pl.DataFrame) -> dict[str, float]:
-    """Per audited quantity whose run SEs the coverage audit of ``points`` finds too small
-    (:func:`coverage_table`: the 95 % interval of rms z above 1), that rms z: the factor by
-    which a run's SE falls short of the spread between its replicas."""
-    tab = coverage_table(points) if points.height else pl.DataFrame()
+def audit_factors(tab: pl.DataFrame) -> dict[str, float]:
+    """Per audited quantity whose run SEs the coverage audit ``tab`` (:func:`coverage_table`)
+    finds too small (the 95 % interval of rms z above 1), that rms z: the factor by which a
+    run's SE falls short of the spread between its replicas."""
     return {r["observable"]: float(r["rms_z"]) for r in tab.iter_rows(named=True)
             if r["pairs"] > 0 and r["rms_z_lo"] > 1}
 
@@ -795,8 +794,8 @@ def coverage_verdicts(tab: pl.DataFrame) -> list[str]:
     return out
 
 
-def _coverage_section(points: pl.DataFrame, out: Path) -> list[str]:
-    tab = coverage_table(points)
+def _coverage_section(points: pl.DataFrame, out: Path, tab: pl.DataFrame) -> list[str]:
+    """The audit ``tab`` (:func:`coverage_table` of ``points``) and what it says."""
     per = steady_rows(points).group_by(list(POINT_BY)).len()["len"] if points.height else None
     cmd = (f"python -m granflow.analysis.coverage {out} --by {','.join(POINT_BY)} "
            f"--observables {','.join(tab['observable'])}")
@@ -1111,7 +1110,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     points = refuse_few_blocks(raw) if raw.height else raw
     profiles = _of_steady(points, refuse_few_blocks(raw, _read(out, "profiles")))
     zones = _of_steady(points, refuse_few_blocks(raw, _read(out, "zones")))
-    every_depth = point_values(points, audit_factors(points)) if points.height \
+    audit = coverage_table(points) if points.height else pl.DataFrame()
+    every_depth = point_values(points, audit_factors(audit)) if points.height \
         else pl.DataFrame()
     values = main_depth(every_depth)
     steady = _steady(values).filter(~pl.col("branch")) if values.height else values
@@ -1130,7 +1130,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     sections = [_stiffness_section(points, values, profiles, means, zones, figdir),
                 _se_section(se, figdir, ruled=bool(
                     "tau_max" in points.columns and points["tau_max"].null_count() == 0)),
-                (_coverage_section(points, out), [])]
+                (_coverage_section(points, out, audit), [])]
     if steady.height:
         sections[:0] = [_fig5_section(steady, means, figdir),
                         _zones_section(steady, profiles, means,
