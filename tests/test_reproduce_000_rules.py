@@ -635,6 +635,10 @@ def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
     # the replicated point keeps the larger of its within and between SEs
     assert three["u_slip_se"] == pytest.approx(point_values(points).sort("W")["u_slip_se"][0])
     assert not three["audit_scaled"] and "audit" not in _se_note(three)
+    # a one-replica point without the scaled SEs (too few blocks) is not said to be scaled
+    bare = points.with_columns(pl.when(pl.col("W") == 40.0).then(None).otherwise(
+        pl.col("u_slip_se")).cast(pl.Float64).alias("u_slip_se"))
+    assert point_values(bare, f).sort("W").row(1, named=True)["audit_scaled"] is False
     # without pairs (one replica everywhere) nothing is scaled
     assert audit_factors(coverage_table(points.filter(pl.col("seed") == 1))) == {}
 

@@ -128,7 +128,9 @@ def point_values(points: pl.DataFrame,
     one = pl.col("replicas") == 1
     rm = rm.with_columns(*(pl.when(one).then(pl.col(f"{o}_se") * f).otherwise(
         pl.col(f"{o}_se")).alias(f"{o}_se") for o, f in scale.items()),
-        (one & pl.lit(bool(scale))).alias("audit_scaled"))
+        # flagged only where a scaled SE exists (a run too short for blocks has none to scale)
+        (one & pl.any_horizontal(pl.lit(False), *(pl.col(f"{o}_se").is_finite().fill_null(False)
+                                                  for o in scale))).alias("audit_scaled"))
     extra = d.group_by(list(POINT_BY)).agg(
         pl.col("n_blocks").min(), pl.col("xi_plug").mean(), pl.col("xi_wall").mean(),
         pl.col("l_c_at_bound").any(), (pl.col("parent").str.len_chars() > 0).any().alias(
