@@ -339,6 +339,36 @@ def test_the_verdicts_on_000s_claims():
     assert (tab["verdict"] == "cannot tell at this scale").all(), tab
 
 
+def test_phi_ad_holds_only_at_000s_widths_and_where_the_fit_resolves_its_002():
+    from granflow.studies.reproduce_000_report import verdicts
+
+    values = _claims_values(1.385)
+    points = values.select("W", "phi_bar").with_columns(parent=pl.lit(""),
+                                                        state=pl.lit("steady"))
+    claim = "φ_ad: the kinetic coefficients diverge at 0.59 ± 0.002 (fig. 13)"
+
+    def loose(W: float, rel_se: float, phi_ad: float = 0.59) -> pl.DataFrame:
+        phi = np.array([0.50, 0.53, 0.55, 0.57, 0.58])
+        y = 0.1 / (phi_ad - phi)  # an exact divergence (000's at the default)
+        return pl.DataFrame({"W": W, "zone": "loose", "parent": "", "phi": phi,
+                             **{c: y for c in ("p_phi", "mu_phi", "D_phi")},
+                             **{f"{c}_se": rel_se * y for c in ("p_phi", "mu_phi", "D_phi")}})
+
+    def verdict(profiles: pl.DataFrame) -> tuple[str, str]:
+        r = verdicts(points, values, profiles).filter(pl.col("claim (000)") == claim)
+        return r["verdict"][0], r["why"][0]
+
+    assert verdict(loose(60.0, 1e-3))[0] == "holds"
+    # the same divergence with 50 % SEs per bin: consistent with 0.59, but so is much else
+    v, why = verdict(loose(60.0, 0.5))
+    assert v == "cannot tell at this scale" and "exceeds 000's ± 0.002" in why
+    # only narrower channels: not 000's widths
+    v, why = verdict(loose(40.0, 1e-3))
+    assert v == "cannot tell at this scale" and "W >= 60" in why
+    # far off with a wide SE still does not hold
+    assert verdict(loose(60.0, 0.02, phi_ad=0.62))[0] == "does not hold"
+
+
 def test_the_report_of_a_campaign_not_yet_begun(tmp_path):
     path = write_report(tmp_path, tmp_path / "r.md", rp.widths_plan(), rp.paper_plan())
     text = path.read_text()
