@@ -24,6 +24,7 @@ from granflow.studies import cross_scene_report as csr
 
 CHANNEL = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000"
 CROSS = Path(__file__).resolve().parents[1] / "docs" / "data" / "cross_scene"
+WIDTHS = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000_widths"
 
 
 def test_the_gradient_frame_is_the_channels_measure():
@@ -162,6 +163,24 @@ def test_a_law_calibrated_below_the_channels_stress_is_refused():
 def test_a_missing_channel_dataset_is_named(tmp_path):
     with pytest.raises(ParameterError, match="no points.parquet, profiles.parquet"):
         cm.channel_cases(tmp_path)
+
+
+def test_the_report_on_a_channel_dataset_without_wide_runs_says_so(tmp_path):
+    # the widths campaign as it stands before its W >= 60 runs (the target's widths): the
+    # report is written from the committed calibration and says the target is not tested
+    channel, out = tmp_path / "channel", tmp_path / "cross"
+    channel.mkdir(), out.mkdir()
+    for f in ("points", "profiles", "zones"):
+        t = pl.read_parquet(WIDTHS / f"{f}.parquet")
+        t.filter(pl.col("W") <= 40).write_parquet(channel / f"{f}.parquet")
+    for f in CROSS.glob("*.parquet"):
+        (out / f.name).write_bytes(f.read_bytes())
+    report = out / "cross_scene.md"
+    cs.main(["--full", "--out", str(out), "--report", str(report), "--only-report",
+             "--channel", str(channel)])
+    text = report.read_text()
+    assert "**No run at W >= 60**: the wide-channel target is not tested here." in text
+    assert "Cannot tell: no run at W >= 60" in text
 
 
 @pytest.fixture(scope="module")
