@@ -436,3 +436,33 @@ def test_channel_cases_refuse_an_unknown_replica_mode_or_depth(tmp_path):
     with pytest.raises(ParameterError, match=r"invalid B = 30: no steady run at that depth; "
                                              r"allowed one of 10, 20"):
         cm.channel_cases(d, B=30)
+
+
+def test_the_amplitudes_per_point_are_replica_means_and_their_trend_is_tested():
+    from granflow.studies.cross_scene_report_bulk import (
+        replica_amplitude_lines,
+        replica_amplitudes,
+    )
+
+    # two widths, three replicas each: the whole-profile A falls with W well beyond its
+    # replica spread; the bulk A is one value within its SEs
+    best = pl.DataFrame({"W": [20.0] * 3 + [40.0] * 3, "phi_bar": 0.6,
+                         "seed": [1, 2, 3] * 2, "A_best": [0.83, 0.84, 0.835, 0.50, 0.51, 0.505]})
+    bulk = best.select("W", "phi_bar", "seed").with_columns(
+        A=pl.Series([0.45, 0.46, 0.44, 0.46, 0.45, 0.44]), A_se=pl.lit(0.01))
+    tab = replica_amplitudes(best, bulk)
+    assert tab["replicas"].to_list() == [3, 3]
+    assert tab["A_whole"].to_list() == pytest.approx([0.835, 0.505])
+    # the whole-profile SE is the between-replica one (Student-scaled), the bulk's the larger
+    between = replicas.small_sample_factor(3) * 0.005 / math.sqrt(3)
+    assert tab["A_whole_se"].to_list() == pytest.approx([between, between])
+    assert tab["A_se"][0] == pytest.approx(max(0.01 / math.sqrt(3),
+                                               replicas.small_sample_factor(3) * 0.01
+                                               / math.sqrt(3)))
+    text = "\n".join(replica_amplitude_lines(best, bulk))
+    assert "whole-profile own best A against W: -0.0165" in text
+    assert "bulk A against W" in text and "does not trend measurably" in text
+    assert "| 20 | 0.6 | 3 | 0.835 ± 0.004 | 0.450 ± 0.008 |" in text
+    # one replica per point: nothing at the replica level
+    assert replica_amplitude_lines(best.filter(pl.col("seed") == 1),
+                                   bulk.filter(pl.col("seed") == 1)) == []

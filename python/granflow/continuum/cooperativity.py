@@ -202,15 +202,19 @@ class Trend:
     chi2_dof: float
 
 
-def trend(table: pl.DataFrame, against: str) -> Trend:
+def trend(table: pl.DataFrame, against: str, least: int = 3) -> Trend:
     """Does the bulk amplitude trend with ``against`` ("W" or "phi_bar")? Weighted least
-    squares over the rows of :func:`bulk_table` with an amplitude."""
+    squares over the rows of :func:`bulk_table` with an amplitude (or any table with ``A``,
+    ``A_se`` and ``against``: points' replica means), at least ``least`` of them (2: the
+    line through two points, its slope's SE from theirs alone)."""
     if against not in ("W", "phi_bar"):
         raise ParameterError(f"invalid against = {against!r}: allowed 'W' or 'phi_bar'")
+    if not (isinstance(least, int) and least >= 2):
+        raise ParameterError(f"invalid least = {least!r}: allowed an integer >= 2")
     t = table.filter(pl.col("A").is_not_null() & pl.col("A").is_not_nan())
-    if t.height < 3:
-        raise ParameterError(f"invalid table: {t.height} runs with a bulk amplitude, allowed "
-                             ">= 3 for a trend")
+    if t.height < least:
+        raise ParameterError(f"invalid table: {t.height} rows with an amplitude, allowed "
+                             f">= {least} for a trend")
     a, s, v = (t[c].to_numpy().astype(np.float64) for c in ("A", "A_se", against))
     w = 1.0 / s**2
     mean, mean_se = weighted_mean(a, s)

@@ -508,7 +508,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         md_table(_boundary_table(pred.boundary), {"x0": ".2f"}), "",
         *dem_phi_lines(pred),
         *bulk_lines(cases, pred.cal, _reference(cases), pred.residuals, out,
-                    figdir / "bulk_amplitude.png", rel),
+                    figdir / "bulk_amplitude.png", rel, pred.cases),
         "## 4. The DEM's bins against the cell's law (000's loose-zone claim)", "",
         "Each DEM bin's mu and phi against the cell's law at the bin's own I; in range: the "
         "bins whose I lies in the calibrated range (the others would test an extrapolation):",

@@ -17,6 +17,7 @@ import polars as pl
 from matplotlib.figure import Figure
 
 from granflow.analysis.plots import save_figure
+from granflow.analysis.replicas import replica_mean
 from granflow.continuum.calibration import Calibration
 from granflow.continuum.channel_model import (
     A_WIDTH,
@@ -46,7 +47,7 @@ from granflow.continuum.wall_layer import (
     predict_layered,
 )
 
-from ._campaign import md_table, pm_column
+from ._campaign import md_table, pm, pm_column
 
 #: |z| above which a trend counts as measured (2 SE)
 Z_TREND = 2.0
@@ -139,11 +140,69 @@ def plot_amplitude(bins: pl.DataFrame, table: pl.DataFrame, path: Path) -> Path:
     return save_figure(fig, path)
 
 
+def _trend_word(z: float) -> str:
+    return "**trends**" if abs(z) > Z_TREND else "does not trend measurably"
+
+
+def replica_amplitudes(best: pl.DataFrame, bulk: pl.DataFrame) -> pl.DataFrame:
+    """One row per point (W, phi_bar) with its ``replicas``: the whole-profile own best
+    amplitude (``best``: a run's ``A_best``) and the bulk amplitude (``bulk``: a run's ``A``,
+    ``A_se``) as the replicas' means (granflow.analysis.replicas.replica_mean: the SE the
+    larger of the within-run and the Student-scaled between-replica SE). A whole-profile
+    fit has no SE of its own, so its SE is the between-replica one (NaN for one replica)."""
+    by = ["W", "phi_bar"]
+    whole = replica_mean(best.select(*by, pl.col("A_best").alias("A_whole"),
+                                     pl.lit(0.0).alias("A_whole_se")), by, ["A_whole"])
+    whole = whole.with_columns(pl.when(pl.col("replicas") > 1).then(pl.col("A_whole_se"))
+                               .otherwise(None).alias("A_whole_se"))
+    have = bulk.filter(pl.col("A").is_not_nan())
+    inner = replica_mean(have.select(*by, "A", "A_se"), by, ["A"]).select(
+        *by, pl.col("replicas").alias("bulk_replicas"), "A", "A_se")
+    return whole.select(*by, "replicas", "A_whole", "A_whole_se").join(
+        inner, on=by, how="left").sort(by)
+
+
+def replica_amplitude_lines(best: pl.DataFrame, bulk: pl.DataFrame) -> list[str]:
+    """Whether the amplitudes trend with W (and phi_bar) once each point is its replicas'
+    mean (:func:`replica_amplitudes`); empty where no point has two replicas."""
+    tab = replica_amplitudes(best, bulk)
+    if not tab.height or int(tab["replicas"].max()) < 2:  # type: ignore[arg-type]
+        return []
+    words = []
+    for col, name in (("A_whole", "whole-profile own best A"), ("A", "bulk A")):
+        t = tab.select("W", "phi_bar", pl.col(col).alias("A"), pl.col(f"{col}_se")
+                       .alias("A_se")).filter(pl.col("A_se").is_finite() & (pl.col("A_se") > 0))
+        for against in ("W", "phi_bar"):
+            if t[against].n_unique() < 2:
+                continue
+            tr = trend(t, against, least=2)
+            words.append(f"{name} against {against}: {tr.slope:.3g} ± {tr.se:.1g} per "
+                         f"{'d' if against == 'W' else 'unit phi_bar'} (z = {tr.z:.1f}, "
+                         + _trend_word(tr.z) + ")")
+    shown = tab.select(
+        "W", "phi_bar", "replicas",
+        pl.struct("A_whole", "A_whole_se").map_elements(
+            lambda r: pm(r["A_whole"], r["A_whole_se"], 3) if r["A_whole_se"] is not None
+            else f"{r['A_whole']:.3f}", return_dtype=pl.Utf8).alias("own best A (whole profile)"),
+        pl.struct("A", "A_se").map_elements(
+            lambda r: pm(r["A"], r["A_se"], 3) if r["A"] is not None else "-",
+            return_dtype=pl.Utf8).alias("bulk A"))
+    return ["* **Per point, with its replicas** (the replicas' mean; the SE the larger of the "
+            "within-run and the Student-scaled between-replica SE, "
+            "granflow.analysis.replicas.replica_mean; a whole-profile fit has no SE of its "
+            "own, so there the SE is the between-replica one):", "",
+            md_table(shown), "",
+            "  Over the points: " + ("; ".join(words) if words else
+                                     "one width and one phi_bar: no trend to fit") + ".", ""]
+
+
 def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
                reference: ChannelCase | None, residuals: pl.DataFrame, out: Path,
-               fig_path: Path, rel: Path) -> list[str]:
+               fig_path: Path, rel: Path, best: pl.DataFrame | None = None) -> list[str]:
     """The section's markdown (``residuals``: the DEM's bins against the cell's law, the
-    prediction's); writes ``out/bulk_amplitude.parquet`` and the figures."""
+    prediction's; ``best``: the runs' whole-profile own best amplitudes, W, phi_bar, seed,
+    A_best, for the replica-level trend); writes ``out/bulk_amplitude.parquet`` and the
+    figures."""
     table = bulk_table(cases, cal, reference)
     table.write_parquet(out / "bulk_amplitude.parquet")
     bins = bin_amplitudes(cases, cal)
@@ -173,8 +232,7 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
         pl.col("wall_share").alias("share of u_max - u_slip at x < x_bulk"),
         pl.col("u_rel_bulk").alias("misfit past x_bulk, reference's A held"))
 
-    def verdict(z: float) -> str:
-        return "**trends**" if abs(z) > Z_TREND else "does not trend measurably"
+    rep = replica_amplitude_lines(best, have) if best is not None else []
 
     lines = [
         "## The amplitude measured in the bulk", "",
@@ -192,7 +250,9 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
         "start, chosen once for every run. Each "
         "run's bulk amplitude: least squares of g''/g against mu_s - mu over its window, its "
         "SE the larger of the spread over draws of the bins within their SEs and the "
-        "residuals' SE (single runs: no replica SE yet); mu_s (free line): where a line with "
+        "residuals' SE (" + ("single runs; the points' replica means below" if rep else
+                             "single runs: no replica SE yet")
+        + "); mu_s (free line): where a line with "
         "a free intercept reaches zero decay, against the cell's mu_s = "
         f"{have['mu_s'].to_numpy().min():.3f}-{have['mu_s'].to_numpy().max():.3f}:", "",
         md_table(shown), "",
@@ -206,7 +266,7 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
         f"phi_bar: {tp.slope:.2g} ± {tp.se:.1g} (z = {tp.z:.1f}); against the bins' own phi "
         f"(pooled window bins): {slope:.2g} ± {slope_se:.2g} (z = "
         f"{slope / slope_se:.1f}). With SEs from single runs the bulk amplitude "
-        f"{verdict(tw.z)} with W and {verdict(tp.z)} with phi_bar"
+        f"{_trend_word(tw.z)} with W and {_trend_word(tp.z)} with phi_bar"
         + (f"; with the SEs scaled by sqrt(chi2/dof) the z-values are "
            f"{tw.z / math.sqrt(tw.chi2_dof):.1f} and {tp.z / math.sqrt(tp.chi2_dof):.1f}"
            if tw.chi2_dof > 1 else "")
@@ -215,7 +275,8 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
         "whose stencils do not overlap): "
         + ("it does" if abs(slope / slope_se) > Z_TREND else "the bins show none that their "
            "scatter resolves")
-        + "; the replicas of the widths campaign decide the run-level trend.",
+        + ("; the points' replica means below decide the run-level trend." if rep else
+           "; the replicas of the widths campaign decide the run-level trend."),
         f"* **The wall layer holds {np.nanmin(share):.0%}-{np.nanmax(share):.0%} of "
         f"u_max - u_slip** (x < {X_BULK:g} d): the issue's 10 % target in u - u_slip is "
         "decided there, where neither model's flow rule holds (the DEM's mu lies below the "
@@ -228,7 +289,7 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
             f"{held['A_ref'].to_numpy()[0]:.3f} held, the nonlocal model (its phi(I)) with "
             f"boundary data at the first bin past {X_BULK:g} d predicts the rise past it to "
             f"{mis.min():.3f}-{mis.max():.3f} (median {np.median(mis):.3f}) of that rise.")
-    lines += ["", f"![bulk amplitude]({fig.relative_to(rel)})", ""]
+    lines += ["", *rep, f"![bulk amplitude]({fig.relative_to(rel)})", ""]
     if reference is not None:
         a_bulk = float(table.filter(pl.col("A_ref").is_not_nan())["A_ref"][0])
         lines += layer_lines(layer_table(cases, cal, a_bulk, reference), out)
