@@ -27,9 +27,10 @@ def particle_steps(plan: Any) -> Callable[[Any], float]:
 
 
 #: the channel's throughput (particle-steps per core-second) where a dataset has no finished
-#: point to measure it on: the widths plan's W = 150, phi_bar = 0.60 point at t = 250-300
-#: (one thread, beside one other one-thread run; benchmarks/NOTES.md, 2026-11-27)
-UNMEASURED_RATE = 4.15e6
+#: point to measure it on: the widths plan's W = 150, phi_bar = 0.60 point, developed (seven
+#: stints, t = 1350-1700, CPU time; one thread beside one other one-thread run;
+#: benchmarks/NOTES.md, 2026-11-28 fourth session; one stint at t = 250-300 gave 4.15e6)
+UNMEASURED_RATE = 5.6e6
 
 
 def planning_rate(rate: float | None) -> tuple[float, str]:
