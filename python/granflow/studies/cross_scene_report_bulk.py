@@ -47,7 +47,7 @@ from granflow.continuum.wall_layer import (
     predict_layered,
 )
 
-from ._campaign import md_table, pm, pm_column
+from ._campaign import md_table, pm_column
 
 #: |z| above which a trend counts as measured (2 SE)
 Z_TREND = 2.0
@@ -154,7 +154,7 @@ def replica_amplitudes(best: pl.DataFrame, bulk: pl.DataFrame) -> pl.DataFrame:
     whole = replica_mean(best.select(*by, pl.col("A_best").alias("A_whole"),
                                      pl.lit(0.0).alias("A_whole_se")), by, ["A_whole"])
     whole = whole.with_columns(pl.when(pl.col("replicas") > 1).then(pl.col("A_whole_se"))
-                               .otherwise(None).alias("A_whole_se"))
+                               .otherwise(float("nan")).alias("A_whole_se"))
     have = bulk.filter(pl.col("A").is_not_nan())
     inner = replica_mean(have.select(*by, "A", "A_se"), by, ["A"]).select(
         *by, pl.col("replicas").alias("bulk_replicas"), "A", "A_se")
@@ -179,14 +179,10 @@ def replica_amplitude_lines(best: pl.DataFrame, bulk: pl.DataFrame) -> list[str]
             words.append(f"{name} against {against}: {tr.slope:.3g} ± {tr.se:.1g} per "
                          f"{'d' if against == 'W' else 'unit phi_bar'} (z = {tr.z:.1f}, "
                          + _trend_word(tr.z) + ")")
-    shown = tab.select(
+    shown = tab.fill_null(float("nan")).select(
         "W", "phi_bar", "replicas",
-        pl.struct("A_whole", "A_whole_se").map_elements(
-            lambda r: pm(r["A_whole"], r["A_whole_se"], 3) if r["A_whole_se"] is not None
-            else f"{r['A_whole']:.3f}", return_dtype=pl.Utf8).alias("own best A (whole profile)"),
-        pl.struct("A", "A_se").map_elements(
-            lambda r: pm(r["A"], r["A_se"], 3) if r["A"] is not None else "-",
-            return_dtype=pl.Utf8).alias("bulk A"))
+        pm_column("A_whole", "A_whole_se", "own best A (whole profile)", 3),
+        pm_column("A", "A_se", "bulk A", 3))
     return ["* **Per point, with its replicas** (the replicas' mean; the SE the larger of the "
             "within-run and the Student-scaled between-replica SE, "
             "granflow.analysis.replicas.replica_mean; a whole-profile fit has no SE of its "

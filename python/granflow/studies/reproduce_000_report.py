@@ -826,13 +826,21 @@ W_PAPER_MIN, W_SCALING_MIN = 60.0, 100.0
 #: 000 §3.2: l_c = 11.5 d (printed: 11.45-11.55); Omega/omega -> 1/2 in the shear zones
 L_C_PRINTED = (L_C_PAPER - 0.05, L_C_PAPER + 0.05)
 OMEGA_RATIO_PAPER = (0.5, 0.5)
-def _judge(value: float, se: float, lo: float, hi: float) -> tuple[str, str]:
-    """(verdict, how far) of a value with its SE against 000's interval [lo, hi]."""
+def _judge(value: float, se: float, lo: float, hi: float,
+           resolve: tuple[float, float] | None = None) -> tuple[str, str]:
+    """(verdict, how far) of a value with its SE against 000's interval [lo, hi].
+    ``resolve`` = (the measurement's own SE, 000's quoted +-): an agreement whose own SE
+    exceeds 000's precision cannot confirm it ("cannot tell"); a disagreement still counts."""
     z = interval_z(value, se, lo, hi)
     if not math.isfinite(z):
         return "cannot tell at this scale", NED
     far = f"{z:.1f} SEs from {lo:g}" + (f"-{hi:g}" if hi != lo else "")
-    return ("holds" if agrees(z) else "does not hold"), far
+    if not agrees(z):
+        return "does not hold", far
+    if resolve is not None and resolve[0] > resolve[1]:
+        return ("cannot tell at this scale",
+                far + f", but the fit's own SE {resolve[0]:.4f} exceeds 000's ± {resolve[1]:g}")
+    return "holds", far
 
 
 def _pooled(g: pl.DataFrame, col: str) -> tuple[float, float]:
@@ -947,11 +955,9 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         judged = []
         for name, f in _kinetic_fits(at_paper):
             v, e = f["phi_ad"], math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1])
-            verdict, far = _judge(v, e, PHI_AD_PAPER[0], PHI_AD_PAPER[0])
-            if verdict == "holds" and f["phi_ad_se"] > PHI_AD_PAPER[1]:
-                verdict, far = ("cannot tell at this scale", far + f", but the fit's own SE "
-                                f"{f['phi_ad_se']:.4f} exceeds 000's ± {PHI_AD_PAPER[1]:g}")
-            judged.append((name.split(" ")[0], v, e, verdict, far))
+            judged.append((name.split(" ")[0], v, e,
+                           *_judge(v, e, PHI_AD_PAPER[0], PHI_AD_PAPER[0],
+                                   resolve=(f["phi_ad_se"], PHI_AD_PAPER[1]))))
         verdict = ("does not hold" if any(j[3] == "does not hold" for j in judged)
                    else "holds" if all(j[3] == "holds" for j in judged)
                    else "cannot tell at this scale")
