@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -13,7 +14,7 @@ from typing import Any
 import polars as pl
 import pyarrow as pa
 import pytest
-from granflow.errors import DilationError, InstabilityError, ParameterError
+from granflow.errors import DilationError, GranflowError, InstabilityError, ParameterError
 from granflow.studies._campaign import Study, reanalyse, run_point, run_points
 from granflow.studies._campaign.engine import is_current
 
@@ -155,6 +156,65 @@ def test_a_finished_point_is_not_run_again_and_an_unfinished_one_goes_on(campaig
     meta.write_text(json.dumps(kept))
     row = run_point(Scripted(), POINTS[0], Plan(t_max=15.0), str(out / "work"))
     assert math.isnan(row["cpu_seconds"]) and row["wall_seconds"] > first["wall_seconds"]
+
+
+def test_an_unfinished_point_goes_on_from_its_committed_copy_when_its_work_dir_is_lost(
+        tmp_path: Path):
+    point, work = Point("moved"), tmp_path / "work"
+    whole = run_point(Scripted(), point, Plan(), str(tmp_path / "whole" / "work"))
+    run_point(Scripted(), point, Plan(t_max=6.0), str(work))  # (a session ends at t = 6)
+    kept = tmp_path / "progress" / point.key
+    assert {f.name for f in kept.iterdir()} == {"checkpoint.gfck.zst", "pack.json",
+                                                "meta.json", "series.parquet"}
+    shutil.rmtree(work)  # (the next session starts on a new machine)
+    row = run_point(Scripted(), point, Plan(), str(work))
+    assert row["t_run"] == 10.0 and row["stints"] == 10
+    assert {k: row[k] for k in ("samples", "sample_rows", "state")} == \
+        {k: whole[k] for k in ("samples", "sample_rows", "state")}
+    assert json.loads((work / point.key / "meta.json").read_text())["history"] == \
+        ["flowing"] * 10
+    # once the campaign writes its row, the copy goes
+    run_points(Scripted(), [point], Plan(), tmp_path, workers=1, log=lambda *_: None)
+    assert not kept.exists() and (tmp_path / "points.parquet").exists()
+
+
+class Branching(Scripted):
+    """The point "child" starts from the final state of "parent"."""
+
+    def start(self, scene: Scene, point: Point, plan: Plan, work: Path) -> None:
+        if point.name == "child":
+            scene.restore(work / "parent" / "checkpoint.gfck")
+        else:
+            scene.prepare()
+
+    def starts_from(self, point: Point) -> tuple[str, ...]:
+        return ("parent",) if point.name == "child" else ()
+
+    def dependents(self, key: str, plan: Plan) -> tuple[str, ...]:
+        return ("child",) if key == "parent" else ()
+
+
+def test_a_branch_starts_from_its_parents_kept_copy_which_stays_until_the_branch_is_done(
+        tmp_path: Path):
+    quiet = {"workers": 1, "log": lambda *_: None}
+    run_points(Branching(), [Point("parent")], Plan(t_max=4.0), tmp_path, **quiet)
+    assert (tmp_path / "progress" / "parent" / "pack.json").exists()  # (a branch needs it)
+    shutil.rmtree(tmp_path / "work")  # (the branch runs on a new machine)
+    d = run_points(Branching(), [Point("child")], Plan(t_max=6.0), tmp_path, **quiet)
+    child = d.filter(pl.col("name") == "child").row(0, named=True)
+    assert child["stints"] == 6 and child["t_run"] == 6.0  # (4 of the parent's, 2 of its own)
+    assert not list((tmp_path / "progress").iterdir())
+
+
+def test_a_kept_copy_that_does_not_match_its_checksum_is_refused(tmp_path: Path):
+    point, work = Point("torn"), tmp_path / "work"
+    run_point(Scripted(), point, Plan(t_max=3.0), str(work))
+    pack = tmp_path / "progress" / point.key / "pack.json"
+    pack.write_text(json.dumps({**json.loads(pack.read_text()), "sha256": "0" * 64}))
+    shutil.rmtree(work)
+    with pytest.raises(GranflowError, match="does not match its SHA-256"):
+        run_point(Scripted(), point, Plan(), str(work))
+    assert not (work / point.key / "checkpoint.gfck").exists()
 
 
 def test_reanalyse_calls_the_same_stop_rule(campaign):

@@ -75,6 +75,8 @@ def test_a_finished_point_is_not_run_again(quick):
     assert phases and all(s.endswith(" 0 to run") for s in phases)
     assert pl.read_parquet(out / "points.parquet").height == len(plan.points) + len(
         plan.branches)
+    # every point kept a committed copy between its stints; none outlives its row
+    assert (out / "progress").is_dir() and not list((out / "progress").iterdir())
 
 
 def test_the_report_has_fig5_stiffness_figures_and_cost(quick):

@@ -430,10 +430,12 @@ def test_remaining_costs_the_plans_runs_less_what_a_started_run_has_done(tmp_pat
     b = plan.branches[0]
     b_least, b_cap = plan.t_least(b), plan.limits(b)[0]
     assert 0 < b_least < b_cap
-    # the phi_bar = 0.60 run has reached t = 1000: 1000 of its 2600 are done
-    (tmp_path / "work" / w150.key).mkdir(parents=True)
-    pl.DataFrame({"t": [0.0, 1000.0]}).write_parquet(tmp_path / "work" / w150.key /
-                                                     "series.parquet")
+    # the phi_bar = 0.60 run has reached t = 1000: 1000 of its 2600 are done (read from the
+    # committed copy of its tables, so a fresh clone reports the same; its work directory is
+    # ahead of it here, by a stint not yet kept)
+    for d, t in (("progress", 1000.0), ("work", 1050.0)):
+        (tmp_path / d / w150.key).mkdir(parents=True)
+        pl.DataFrame({"t": [0.0, t]}).write_parquet(tmp_path / d / w150.key / "series.parquet")
     runs2, least2, cap2, _ = _row(remaining(tmp_path, plan, 4e6), "150")
     assert runs2 == 3
     assert least - least2 == pytest.approx(one * 1000 / 2600, abs=0.15)

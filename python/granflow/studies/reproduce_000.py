@@ -43,7 +43,9 @@ state, times, preparation seconds, wall seconds, and every section 3 number with
 half profile to ``OUT/profiles.parquet``, its zone means (fig. 10) to ``OUT/zones.parquet``
 and the SEs of u_slip and u_max over the first quarter, half and all of its steady part to
 ``OUT/se_vs_time.parquet``; unfinished points go on from their checkpoints under
-``OUT/work/`` (not committed).
+``OUT/work/`` (not committed), or on another machine from the copy of them in
+``OUT/progress/`` (committed with the dataset; the stiffness parents' final states stay
+there until their branches are done).
 """
 
 from __future__ import annotations
@@ -431,6 +433,12 @@ class ChannelStudy(Study):
             scene.branch_from(work / point.parent / "checkpoint.gfck")
         else:
             scene.prepare(progress=False)
+
+    def starts_from(self, point: Point) -> tuple[str, ...]:
+        return (point.parent,) if point.parent else ()
+
+    def dependents(self, key: str, plan: Plan) -> tuple[str, ...]:
+        return tuple(b.key for b in (*plan.branches, *plan.later) if b.parent == key)
 
     def context(self, scene: Any) -> dict[str, Any]:
         return {"n": scene.prep_info.get("n")}

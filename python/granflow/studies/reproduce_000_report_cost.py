@@ -11,6 +11,7 @@ from typing import Any
 import polars as pl
 
 from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, run_seconds
+from ._campaign.engine import kept_dir
 
 
 def particles(p: Any) -> float:
@@ -80,7 +81,7 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
     the throughput measured on ``out``'s finished points at that width (:func:`rate_at`;
     ``default`` where none bounds it), from the least each must run (Plan.t_least: its
     development and minimum average) to its cap (t_max), less what a started run has done
-    (its series in ``out/work``); the longest run's hours on one core; the recipe. Report
+    (its series in the committed copy, ``out/progress``); the longest run's hours on one core; the recipe. Report
     lines; none when the plan is done."""
     from ._campaign import done_keys
 
@@ -107,7 +108,8 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
     first = [0, 0.0]
     for p in left:
         t_cap = plan.limits(p)[0]
-        series = out / "work" / p.key / "series.parquet"
+        # (the committed copy of a running point's tables: the same on any clone)
+        series = kept_dir(out / "work", p.key) / "series.parquet"
         t_done = (float(pl.read_parquet(series, columns=["t"])["t"].max())  # type: ignore[arg-type]
                   if series.exists() and not p.parent else 0.0)
         r, source = rate_at(p.W, p.kn, rates, default)

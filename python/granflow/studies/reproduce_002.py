@@ -11,8 +11,9 @@ appended at once to ``OUT/points.parquet`` (one row: the point, its state, steps
 and mean / SE / correlation time of every observable), and the SE of I, phi, mu1 over the first
 quarter, half and all of its steady part to ``OUT/se_vs_time.parquet``: a run that is stopped
 loses only its unfinished points, and those go on from their checkpoints under ``OUT/work/``
-(not committed). The report pools the seeds of a point (inverse-variance), fits (4.2), (4.4),
-(4.6), (4.7) per mu_s, prints each Table 1 row beside the paper's and draws figures 3-8.
+(not committed), or on another machine from the copy of them in ``OUT/progress/``. The
+report pools the seeds of a point (inverse-variance), fits (4.2), (4.4), (4.6), (4.7) per
+mu_s, prints each Table 1 row beside the paper's and draws figures 3-8.
 """
 
 from __future__ import annotations

@@ -7,7 +7,8 @@ A campaign's dataset is a directory of Parquet tables that grow one finished poi
 a finished point is one row of ``OUT/points.parquet`` holding the point's fields and its
 measurements, and its rows of further tables (``Study.tables``) are appended with it, so a
 campaign that is stopped loses only its unfinished points, which go on from their
-checkpoints under ``OUT/work/``.
+checkpoints under ``OUT/work/``, or, on a new machine, from the copy of them that the dataset
+keeps in ``OUT/progress/`` (:mod:`.progress`).
 """
 
 from .command import cli

@@ -5,9 +5,11 @@ A study implements :class:`Study` (one instance, picklable: the pool sends it to
 workers); the loop (:func:`run_point`) is, for each point in ``OUT/work/<key>/``: restore its
 checkpoint and tables, or build and prepare the scene; then stints of
 :meth:`Study.next_steps` steps, each followed by writing the scene's tables, checkpoint and
-``meta.json`` (wall and CPU time, preparation time, the stints' states and the row's context), the
-point's row (:meth:`Study.row`) and the one stop rule (:meth:`Study.stop`), which
-:func:`reanalyse` calls too. A :class:`~granflow.errors.GranflowError` ends a point with
+``meta.json`` (wall and CPU time, preparation time, the stints' states and the row's context),
+the point's row (:meth:`Study.row`), the one stop rule (:meth:`Study.stop`), which
+:func:`reanalyse` calls too, and a copy of the work directory in the committed
+``OUT/progress/<key>/`` (:mod:`.progress`: a work directory lost with its machine is restored
+from there). A :class:`~granflow.errors.GranflowError` ends a point with
 ``state`` "runaway" (a :class:`~granflow.errors.DilationError`) or "failed" and the error.
 """
 
@@ -26,6 +28,8 @@ import polars as pl
 import pyarrow as pa
 
 from granflow.errors import DilationError, GranflowError
+
+from . import progress
 
 
 def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False,
@@ -134,6 +138,17 @@ class Study:
         directory (a branch starts from another point's checkpoint there)."""
         scene.prepare(progress=False)
 
+    def starts_from(self, point: Any) -> tuple[str, ...]:
+        """The keys of the points whose final state :meth:`start` begins ``point`` from
+        (restored into their work directories from their kept copies if need be); none by
+        default."""
+        return ()
+
+    def dependents(self, key: str, plan: Any) -> tuple[str, ...]:
+        """The keys of the points of ``plan`` that start from the final state of the point
+        ``key`` (:meth:`starts_from`): its kept copy stays until they are all done."""
+        return ()
+
     def next_steps(self, scene: Any, point: Any, plan: Any) -> int:
         """Steps of the next stint: the plan's stint, cut at the point's budget; 0 once the
         budget is spent."""
@@ -205,6 +220,9 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     d = Path(work) / point.key
     d.mkdir(parents=True, exist_ok=True)
     ck, meta = d / "checkpoint.gfck", d / "meta.json"
+    copy = kept_dir(work, point.key)
+    if not (ck.exists() and meta.exists()):
+        progress.restore(copy, d)
     scene = study.scene(point, plan, threads)
     # (cpu_seconds: the process's CPU time over the point, all its threads: its core-seconds
     # whatever else shares the cores, where wall_seconds counts the waits as well)
@@ -218,6 +236,9 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
         info.update({"cpu_seconds": math.nan, **kept})
     t0, c0 = time.perf_counter(), time.process_time()
     if not restored:
+        for key in study.starts_from(point):
+            if not (Path(work) / key / "checkpoint.gfck").exists():
+                progress.restore(kept_dir(work, key), Path(work) / key)
         study.start(scene, point, plan, Path(work))
         info["prep_seconds"] = time.perf_counter() - t0
     context = study.context(scene)
@@ -247,6 +268,7 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
             done = study.stop(row, point, plan, history)
             history.append(str(row["state"]))
             write_meta()
+            progress.keep(d, copy)
             if done is not None:
                 break
     except GranflowError as exc:
@@ -262,6 +284,12 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     row.update(study.progress(scene, info["prep_seconds"]), wall_seconds=wall(),
                cpu_seconds=cpu())
     return row
+
+
+def kept_dir(work: str | os.PathLike[str], key: str) -> Path:
+    """Where the point ``key`` of the campaign whose work directories are in ``work``
+    (``OUT/work``) keeps its committed copy between stints: ``OUT/progress/<key>``."""
+    return Path(work).parent / "progress" / key
 
 
 def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -> int:
@@ -382,6 +410,15 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
         + (f" ({rerun} of them again: rows from before the present stop rule)"
            if rerun else ""))
     args = [(study, p, plan, str(outp / "work")) for p in todo]
+    finished = set(done)
+
+    def tidy(key: str) -> None:
+        # (a finished point's kept copy goes once no unfinished point starts from it)
+        if key in finished and all(k in finished for k in study.dependents(key, plan)):
+            progress.forget(kept_dir(outp / "work", key))
+
+    for p in points:
+        tidy(p.key)
     for _, row in map_tasks(run_point, args, workers=workers, scheduler=scheduler,
                             threads=threads):
         extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
@@ -393,6 +430,9 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
         write_rows(outp / "points.parquet", [row], append=True, point=cls)
         for stem, rows in extras.items():
             write_rows(outp / f"{stem}.parquet", rows, append=True, point=cls)
+        finished.add(key)
+        for k in (key, *study.starts_from(point_of(cls, row))):
+            tidy(k)
         log(f"  {key}: {describe(row)}")
     f = outp / "points.parquet"
     return pl.read_parquet(f) if f.exists() else pl.DataFrame()
