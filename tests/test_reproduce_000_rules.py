@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 from granflow.analysis import channel as ch
 from granflow.analysis import channel_profiles as cp
@@ -691,3 +692,45 @@ def test_a_run_that_never_settles_is_named_with_its_trend():
         "- W = 150, φ̄ = 0.6, seed 1: still accelerating at t = 3200, |v_cm| +3.1% over its "
         "last half (t = 1600-3200): no steady value, so in no table, fit or verdict."]
     assert unsettled_lines(flow.filter(pl.col("state") == "steady")) == []
+
+
+@pytest.mark.slow
+def test_a_committed_copy_keeps_what_the_rows_read_and_a_run_goes_on_from_it(tmp_path):
+    from granflow.studies._campaign import progress
+
+    # the quick plan's channel with a development time: the bins before it are not read
+    plan = replace(rp.quick_plan(), t_dev=10.0, min_average=20.0, t_max=60.0)
+    point = plan.points[0]
+    whole = rp.STUDY.scene(point, plan, 1)
+    rp.STUDY.start(whole, point, plan, tmp_path)
+    whole.run(round(35.0 / point.dt), progress=False)
+    tabs = whole.tables()
+    kept = rp.STUDY.kept_tables(point, plan, tabs)
+    assert kept["bins"].num_rows < tabs["bins"].num_rows
+    assert np.isnan(kept["series"].column("ke_trans").to_numpy()).all()
+
+    def row(t: dict[str, pa.Table] | Any) -> dict[str, Any]:
+        return rp.point_row(point, plan, t["bins"], t["series"], 100)
+
+    def same(a: dict[str, Any], b: dict[str, Any]) -> None:
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k] == b[k] or (isinstance(a[k], float) and math.isnan(a[k])
+                                    and math.isnan(b[k])), k
+
+    assert row(tabs)["state"] != "short"  # (measured: its steady part is averaged)
+    same(row(tabs), row(kept))
+    # a run restored from the copy (on a new machine) goes on to the same row
+    work = tmp_path / "work"
+    work.mkdir()
+    whole.save_checkpoint(work / "checkpoint.gfck")
+    (work / "meta.json").write_text("{}")
+    progress.keep(work, tmp_path / "progress", kept)
+    moved = tmp_path / "moved"
+    assert progress.restore(tmp_path / "progress", moved)
+    resumed = rp.STUDY.scene(point, plan, 1)
+    resumed.restore(moved / "checkpoint.gfck")
+    resumed.load_tables({f.stem: pq.read_table(f) for f in moved.glob("*.parquet")})
+    for s in (whole, resumed):
+        s.run(round(10.0 / point.dt), progress=False)
+    same(row(whole.tables()), row(resumed.tables()))

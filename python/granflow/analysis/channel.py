@@ -30,6 +30,7 @@ from scipy import optimize
 from ._numerics import quiet
 from .binned import bin_matrix, profile_se
 from .channel_profiles import (
+    RAW_COLUMNS,
     ChannelProfiles,
     flow_state,
     profiles,
@@ -503,6 +504,12 @@ def wall_friction(series: TableLike, t_start: float) -> Estimate:
     )
     r = ratio_se(num, den, sample_interval(t[keep]))
     return Estimate(abs(r.value), r.se)
+
+
+#: the columns of the ``bins`` and ``series`` tables that :func:`summary` reads (a campaign
+#: keeps only these between sessions: granflow.studies.reproduce_000.ChannelStudy.kept_tables)
+BINS_READ = ("window", "t0", "t1", "n_samples", "bin", "x_lo", "x_hi", "x", *RAW_COLUMNS)
+SERIES_READ = ("t", "vcm_y", *(f"wall{w}_sigma_{c}" for w in (0, 1) for c in ("xx", "xy")))
 
 
 #: the reported quantities (one value per window of the bins table) whose drift across the

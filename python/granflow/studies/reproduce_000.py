@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from granflow.analysis.estimate import Estimate
 from granflow.material import MATERIAL_000
@@ -400,6 +401,22 @@ ROW_TABLES = {"profile_rows": "profiles", "zone_rows": "zones", "se_rows": "se_v
               "order_rows": "order"}
 
 
+#: time units before the development time from which a committed copy keeps the bins
+#: windows (profiles take those with t0 >= t_dev; the slack keeps a window either side)
+WINDOW_SLACK = 5.0
+
+
+def _blank_except(tab: pa.Table, keep: Sequence[str]) -> pa.Table:
+    """``tab`` with its float columns not in ``keep`` NaN, "not kept" (the same schema, whose
+    columns are never null: a restored scene's tables go on with its own; a constant column
+    compresses to nothing). Other columns are kept: the channel's are the window, bin and
+    step counters."""
+    for i, f in enumerate(tab.schema):
+        if f.name not in keep and pa.types.is_floating(f.type):
+            tab = tab.set_column(i, f, pa.array(np.full(tab.num_rows, np.nan), f.type))
+    return tab
+
+
 def order_rows(point: Point, scene: Any) -> list[dict[str, Any]]:
     """The bond-orientational order across the channel of ``scene``'s present state
     (Channel.order_profile: Q6, crystal-like fraction, coordination per bin), a row per bin
@@ -439,6 +456,24 @@ class ChannelStudy(Study):
 
     def dependents(self, key: str, plan: Plan) -> tuple[str, ...]:
         return tuple(b.key for b in (*plan.branches, *plan.later) if b.parent == key)
+
+    def kept_tables(self, point: Point, plan: Plan,
+                    tables: Mapping[str, pa.Table]) -> Mapping[str, pa.Table]:
+        # (a W = 150 run's tables reach ~80 MB by t = 2600, too much to commit each
+        # session: the copy holds what point_row reads, the columns
+        # granflow.analysis.channel.summary reads (the others NaN) and, with a development
+        # time, the bins from there on; its rows equal the whole tables')
+        from granflow.analysis.channel import BINS_READ, SERIES_READ
+
+        t_dev = plan.t_dev_of(point)
+        kept = dict(tables)
+        for name, read in (("bins", BINS_READ), ("series", SERIES_READ)):
+            if name in kept:
+                kept[name] = _blank_except(kept[name], read)
+        if t_dev and "bins" in kept:
+            bins = kept["bins"]
+            kept["bins"] = bins.filter(pc.greater_equal(bins["t0"], t_dev - WINDOW_SLACK))
+        return kept
 
     def context(self, scene: Any) -> dict[str, Any]:
         return {"n": scene.prep_info.get("n")}

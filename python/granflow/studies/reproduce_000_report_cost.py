@@ -81,8 +81,8 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
     the throughput measured on ``out``'s finished points at that width (:func:`rate_at`;
     ``default`` where none bounds it), from the least each must run (Plan.t_least: its
     development and minimum average) to its cap (t_max), less what a started run has done
-    (its series in the committed copy, ``out/progress``); the longest run's hours on one core; the recipe. Report
-    lines; none when the plan is done."""
+    (its series in the committed copy, ``out/progress``); the longest run's hours on one
+    core; the recipe. Report lines; none when the plan is done."""
     from ._campaign import done_keys
 
     planned = (*plan.points, *plan.branches, *plan.later)

@@ -149,6 +149,13 @@ class Study:
         ``key`` (:meth:`starts_from`): its kept copy stays until they are all done."""
         return ()
 
+    def kept_tables(self, point: Any, plan: Any,
+                    tables: Mapping[str, pa.Table]) -> Mapping[str, pa.Table]:
+        """The part of the point's tables that its committed copy (:mod:`.progress`) holds:
+        all of them by default; a study whose rows read less may keep less (its rows from
+        the kept part must equal those from the whole)."""
+        return tables
+
     def next_steps(self, scene: Any, point: Any, plan: Any) -> int:
         """Steps of the next stint: the plan's stint, cut at the point's budget; 0 once the
         budget is spent."""
@@ -268,7 +275,7 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
             done = study.stop(row, point, plan, history)
             history.append(str(row["state"]))
             write_meta()
-            progress.keep(d, copy)
+            progress.keep(d, copy, study.kept_tables(point, plan, scene.tables()))
             if done is not None:
                 break
     except GranflowError as exc:
