@@ -206,6 +206,25 @@ def test_a_branch_starts_from_its_parents_kept_copy_which_stays_until_the_branch
     assert not list((tmp_path / "progress").iterdir())
 
 
+def test_a_work_directory_behind_the_committed_copy_is_not_run_on(tmp_path: Path,
+                                                                 monkeypatch):
+    point, work = Point("back"), tmp_path / "work"
+    run_point(Scripted(), point, Plan(t_max=4.0), str(work))
+    stale = tmp_path / "stale"
+    shutil.copytree(work / point.key, stale)  # (the machine of an earlier session)
+    run_point(Scripted(), point, Plan(t_max=7.0), str(work))  # (a later one, elsewhere)
+    shutil.rmtree(work / point.key)
+    shutil.copytree(stale, work / point.key)  # (back on the first machine)
+    ran: list[int] = []
+    run = Scene.run
+    monkeypatch.setattr(Scene, "run", lambda self, n, progress=None: (ran.append(n),
+                                                                      run(self, n))[1])
+    row = run_point(Scripted(), point, Plan(), str(work))
+    assert len(ran) == 3  # (from the copy's 7 stints, not the stale 4)
+    assert row["stints"] == 10 and row["samples"] == 40
+    assert len(json.loads((work / point.key / "meta.json").read_text())["history"]) == 10
+
+
 def test_a_kept_copy_that_does_not_match_its_checksum_is_refused(tmp_path: Path):
     point, work = Point("torn"), tmp_path / "work"
     run_point(Scripted(), point, Plan(t_max=3.0), str(work))

@@ -228,7 +228,7 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     d.mkdir(parents=True, exist_ok=True)
     ck, meta = d / "checkpoint.gfck", d / "meta.json"
     copy = kept_dir(work, point.key)
-    if not (ck.exists() and meta.exists()):
+    if progress.ahead(copy, d):
         progress.restore(copy, d)
     scene = study.scene(point, plan, threads)
     # (cpu_seconds: the process's CPU time over the point, all its threads: its core-seconds
@@ -244,7 +244,7 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     t0, c0 = time.perf_counter(), time.process_time()
     if not restored:
         for key in study.starts_from(point):
-            if not (Path(work) / key / "checkpoint.gfck").exists():
+            if progress.ahead(kept_dir(work, key), Path(work) / key):
                 progress.restore(kept_dir(work, key), Path(work) / key)
         study.start(scene, point, plan, Path(work))
         info["prep_seconds"] = time.perf_counter() - t0
@@ -266,16 +266,17 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
     try:
         while (steps := study.next_steps(scene, point, plan)) > 0:
             scene.run(steps, progress=False)
-            for name, tab in scene.tables().items():
+            tables = scene.tables()
+            for name, tab in tables.items():
                 io.write_parquet(tab, d / f"{name}.parquet")
             scene.save_checkpoint(ck)
             write_meta()  # (a checkpoint is never without its meta, even before the row)
-            row = study.row(point, plan, scene.tables(), context)
+            row = study.row(point, plan, tables, context)
             row.update(study.progress(scene, info["prep_seconds"]))
             done = study.stop(row, point, plan, history)
             history.append(str(row["state"]))
             write_meta()
-            progress.keep(d, copy, study.kept_tables(point, plan, scene.tables()))
+            progress.keep(d, copy, study.kept_tables(point, plan, tables))
             if done is not None:
                 break
     except GranflowError as exc:

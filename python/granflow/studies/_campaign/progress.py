@@ -5,7 +5,8 @@ A point's work directory (``OUT/work/<key>/``, not committed) holds its checkpoi
 and ``meta.json``; :func:`keep` copies them after every stint into ``OUT/progress/<key>/``
 (the checkpoint zstd-compressed, with its size and SHA-256 in ``pack.json``; the tables as
 far as the study's rows read them, ``Study.kept_tables``), and
-:func:`restore` copies them back into a work directory that lacks a checkpoint. The copy is
+:func:`restore` copies them back into a work directory that lacks a checkpoint or is behind
+the copy (:func:`ahead`). The copy is
 written whole beside the old one and swapped in, so a crash while keeping leaves the previous
 stint's copy; the point's row, once appended to ``points.parquet``, ends its kept copy
 (:func:`forget`). The checkpoint restores bitwise, so a run resumed from the kept copy goes on
@@ -66,13 +67,19 @@ def _write_table(tab: pa.Table, f: Path) -> None:
                    column_encoding=dict.fromkeys(floats, "BYTE_STREAM_SPLIT"))
 
 
+def _source(kept: Path) -> Path | None:
+    """The whole copy: ``kept``, or the previous one if a crash came between the swap's two
+    renames; None if there is neither."""
+    return next((p for p in (kept, kept.with_name(kept.name + ".old"))
+                 if (p / "pack.json").exists()), None)
+
+
 def restore(kept: Path, work_dir: Path) -> bool:
-    """Fill ``work_dir`` from the copy in ``kept`` (or the previous copy, if a crash came
-    between the swap's two renames); returns whether there was one. A copy whose checkpoint
+    """Fill ``work_dir`` from the copy in ``kept`` (:func:`_source`), replacing what it held;
+    returns whether there was one. A copy whose checkpoint
     does not match its recorded SHA-256 raises :class:`~granflow.errors.GranflowError`
     (nothing is written then)."""
-    src = next((p for p in (kept, kept.with_name(kept.name + ".old"))
-                if (p / "pack.json").exists()), None)
+    src = _source(kept)
     if src is None:
         return False
     info = json.loads((src / "pack.json").read_text())
@@ -82,6 +89,10 @@ def restore(kept: Path, work_dir: Path) -> bool:
         raise GranflowError(f"the kept checkpoint in {src} does not match its SHA-256 in "
                             "pack.json: delete that directory to run the point from the start")
     work_dir.mkdir(parents=True, exist_ok=True)
+    # (a stale work directory's checkpoint goes first: until the copy's is in, the directory
+    # has none, so a crash here means restoring again)
+    for f in (work_dir / "checkpoint.gfck", *work_dir.glob("*.parquet")):
+        f.unlink(missing_ok=True)
     for f in src.iterdir():
         if f.name not in (PACKED, "pack.json"):
             shutil.copy2(f, work_dir / f.name)
@@ -89,6 +100,22 @@ def restore(kept: Path, work_dir: Path) -> bool:
     tmp.write_bytes(raw)
     tmp.rename(work_dir / "checkpoint.gfck")  # (last: a work directory with a checkpoint is whole)
     return True
+
+
+def ahead(kept: Path, work_dir: Path) -> bool:
+    """Whether the copy in ``kept`` is further on than ``work_dir``: it has more stints in
+    its ``meta.json`` history, or ``work_dir`` has no checkpoint (a work directory left on a
+    machine that a later session ran past, elsewhere, is stale)."""
+    src = _source(kept)
+    if src is None:
+        return False
+    if not ((work_dir / "checkpoint.gfck").exists() and (work_dir / "meta.json").exists()):
+        return True
+
+    def stints(d: Path) -> int:
+        return len(json.loads((d / "meta.json").read_text()).get("history", []))
+
+    return stints(src) > stints(work_dir)
 
 
 def forget(kept: Path) -> None:
