@@ -707,6 +707,10 @@ def test_a_committed_copy_keeps_what_the_rows_read_and_a_run_goes_on_from_it(tmp
     tabs = whole.tables()
     kept = rp.STUDY.kept_tables(point, plan, tabs)
     assert kept["bins"].num_rows < tabs["bins"].num_rows
+    # before the development time, the last window alone (a restored scene has a bins table)
+    early = rp.STUDY.kept_tables(point, replace(plan, t_dev=1000.0), tabs)["bins"]
+    assert early.num_rows and set(early["window"].to_pylist()) == {
+        max(tabs["bins"]["window"].to_pylist())}
     assert np.isnan(kept["series"].column("ke_trans").to_numpy()).all()
 
     def row(t: dict[str, pa.Table] | Any) -> dict[str, Any]:
