@@ -25,28 +25,27 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from granflow.errors import GranflowError
+from granflow.io import atomic_path
 
 #: the kept checkpoint's name and its compression (zstd: ~2/3 of the raw size, ~10 ms per MB)
 PACKED = "checkpoint.gfck.zst"
 _LEVEL = 3
 
 
-def keep(work_dir: Path, kept: Path, tables: Mapping[str, pa.Table] | None = None) -> None:
+def keep(work_dir: Path, kept: Path, tables: Mapping[str, pa.Table]) -> None:
     """Copy the checkpoint and ``meta.json`` of ``work_dir`` into ``kept`` with ``tables``
-    (default: the work directory's), replacing what it held; nothing is kept while
-    ``work_dir`` has no checkpoint."""
+    (``Study.kept_tables``), replacing what it held; nothing is kept while ``work_dir`` has
+    no checkpoint."""
     ck, meta = work_dir / "checkpoint.gfck", work_dir / "meta.json"
     if not (ck.exists() and meta.exists()):
         return
-    tmp, old = kept.with_name(kept.name + ".tmp"), kept.with_name(kept.name + ".old")
+    tmp, old = _beside(kept, ".tmp"), _beside(kept, ".old")
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     raw = ck.read_bytes()
     (tmp / PACKED).write_bytes(pa.Codec("zstd", compression_level=_LEVEL)
                                .compress(raw, asbytes=True))
     shutil.copy2(meta, tmp / meta.name)
-    if tables is None:
-        tables = {f.stem: pq.read_table(f) for f in sorted(work_dir.glob("*.parquet"))}
     for name, tab in tables.items():
         _write_table(tab, tmp / f"{name}.parquet")
     (tmp / "pack.json").write_text(json.dumps(
@@ -67,11 +66,16 @@ def _write_table(tab: pa.Table, f: Path) -> None:
                    column_encoding=dict.fromkeys(floats, "BYTE_STREAM_SPLIT"))
 
 
+def _beside(kept: Path, suffix: str) -> Path:
+    """The directory beside ``kept`` that a swap writes (".tmp") or moves it to (".old")."""
+    return kept.with_name(kept.name + suffix)
+
+
 def _source(kept: Path) -> Path | None:
     """The whole copy: ``kept``, or the previous one if a crash came between the swap's two
     renames; None if there is neither."""
-    return next((p for p in (kept, kept.with_name(kept.name + ".old"))
-                 if (p / "pack.json").exists()), None)
+    return next((p for p in (kept, _beside(kept, ".old")) if (p / "pack.json").exists()),
+                None)
 
 
 def restore(kept: Path, work_dir: Path) -> bool:
@@ -96,9 +100,8 @@ def restore(kept: Path, work_dir: Path) -> bool:
     for f in src.iterdir():
         if f.name not in (PACKED, "pack.json"):
             shutil.copy2(f, work_dir / f.name)
-    tmp = work_dir / "checkpoint.gfck.tmp"
-    tmp.write_bytes(raw)
-    tmp.rename(work_dir / "checkpoint.gfck")  # (last: a work directory with a checkpoint is whole)
+    with atomic_path(work_dir / "checkpoint.gfck") as tmp:  # (last: then the directory is whole)
+        tmp.write_bytes(raw)
     return True
 
 
@@ -120,5 +123,5 @@ def ahead(kept: Path, work_dir: Path) -> bool:
 
 def forget(kept: Path) -> None:
     """Remove the kept copy of a point whose row is written."""
-    for p in (kept, kept.with_name(kept.name + ".tmp"), kept.with_name(kept.name + ".old")):
+    for p in (kept, _beside(kept, ".tmp"), _beside(kept, ".old")):
         shutil.rmtree(p, ignore_errors=True)
