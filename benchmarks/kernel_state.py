@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+from tiling import tile  # noqa: E402
 
 
 def main() -> None:
@@ -27,17 +28,11 @@ def main() -> None:
     import compare_lammps as cl  # the cached flowing state lives there
 
     st = cl.channel_state()
+    lx = float(st["hi"][0] - st["lo"][0])
+    st = tile({**st, "hi": st["hi"] - st["lo"]}, (1, *a.tile))
     x, v, w, d = (np.asarray(st[k], dtype=float) for k in ("x", "v", "omega", "d"))
-    lx, ly, lz = (float(c) for c in st["hi"] - st["lo"])
-    xs, vs, ws, ds = [], [], [], []
-    for i in range(a.tile[0]):
-        for j in range(a.tile[1]):
-            xs.append(x + np.array([0.0, i * ly, j * lz]))
-            vs.append(v)
-            ws.append(w)
-            ds.append(d)
-    x, v, w, d = (np.concatenate(z) for z in (xs, vs, ws, ds))
-    hdr = np.array([1, len(d), lx, ly * a.tile[0], lz * a.tile[1], cl.DT], dtype="<f8")
+    _, ly, lz = (float(c) for c in st["hi"])
+    hdr = np.array([1, len(d), lx, ly, lz, cl.DT], dtype="<f8")
     with open(a.out, "wb") as f:
         f.write(hdr.tobytes())
         f.write(np.column_stack([x, v, w, d]).astype("<f8").tobytes())

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import subprocess
 import sys
 import tempfile
@@ -31,45 +30,24 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 import compare_lammps as cl  # noqa: E402  (the cached flowing channel state lives there)
 from kernel_throughput import rss_bytes  # noqa: E402
+from tiling import pair_counts, tile  # noqa: E402
 
 OUT = HERE / "out"
 SIZES = (5_000, 20_000, 100_000, 1_000_000)
-
-
-def tiling(n_target: int, n0: int) -> tuple[int, int]:
-    """Two copy counts (a, b), a <= b, with a*b within 5 % of n_target/n0 (or the closest),
-    as equal as possible."""
-    c = max(1, round(n_target / n0))
-    cand = [(a, max(1, round(c / a))) for a in range(1, int(math.sqrt(c)) + 1)]
-    close = [t for t in cand if abs(t[0] * t[1] - c) <= 0.05 * c]
-    if not close:
-        close = [min(cand, key=lambda t: abs(t[0] * t[1] - c))]
-    return max(close, key=lambda t: t[0])
 
 
 def tiled(n_target: int, flow_steps: int, grow: str) -> dict[str, Any]:
     """The cached channel state tiled to about ``n_target`` particles (a state dict as
     ``compare_lammps.channel_state`` returns, plus ``copies``)."""
     st = cl.channel_state(flow_steps)
-    n0 = len(st["x"])
-    ta, tb = tiling(n_target, n0)
-    nx, ny, nz = (ta, tb, 1) if grow == "WH" else (1, ta, tb)
-    shift = np.array([[i * cl.W, j * cl.H, k * cl.B] for i in range(nx) for j in range(ny)
-                      for k in range(nz)])
-    rep = len(shift)
-    width = nx * cl.W
-    return {
-        **st, "x": (st["x"][None, :, :] + shift[:, None, :]).reshape(-1, 3),
-        "v": np.tile(st["v"], (rep, 1)), "omega": np.tile(st["omega"], (rep, 1)),
-        "d": np.tile(st["d"], rep), "hi": np.array([width, ny * cl.H, nz * cl.B]),
-        "walls": [(0.0, 1.0), (width, -1.0)], "copies": [nx, ny, nz],
-    }  # fmt: skip
+    ta, tb = pair_counts(n_target, len(st["x"]))
+    out = tile(st, (ta, tb, 1) if grow == "WH" else (1, ta, tb))
+    width = out["hi"][0]
+    return {**out, "walls": [(0.0, 1.0), (width, -1.0)]}
 
 
 def steps_for(budget: float, n: int) -> int:
