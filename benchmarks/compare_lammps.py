@@ -43,6 +43,7 @@ from granflow.scenes.channel import Channel
 
 sys.path.insert(0, str(Path(__file__).parent))
 import lammps_peer as lp  # noqa: E402
+from state_sim import simulation  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 
@@ -136,15 +137,9 @@ def gf_sim(st: State, gamma_n: float | None, threads: int = 1, omega: bool = Tru
         law = gf.ContactLaw(kn=KN, e_n=E_N, mu=MU, kt=KT, xi_t_ratio=0.5)
     else:
         law = gf.ContactLaw(kn=KN, e_n=None, xi_n=gamma_n, mu=MU, kt=KT, xi_t_ratio=0.5)
-    channel = st["kind"] == "channel"
-    return gf.Simulation(
-        st["x"], st["d"],
-        gf.Box(length=tuple(st["hi"] - st["lo"]), lo=tuple(st["lo"]), periodic=st["periodic"]),
-        law, density=DENSITY, velocities=st["v"],
-        angular_velocities=st["omega"] if omega else np.zeros_like(st["v"]),
-        walls=[gf.Wall(0, p, s) for p, s in st["walls"]], wall_law=law if channel else None,
-        gravity=(0.0, -G, 0.0) if channel else None, dt=dt, skin=skin, threads=threads,
-    )  # fmt: skip
+    return simulation(st, law, density=DENSITY, dt=dt, skin=skin,
+                      gravity=G if st["kind"] == "channel" else None, threads=threads,
+                      omega=omega)  # fmt: skip
 
 
 def data_file(st: State, path: Path, omega: bool = True) -> Path:

@@ -72,22 +72,13 @@ def lammps_rate(n_target: int, budget: float, flow_steps: int, grow: str,
 def one(n_target: int, threads: list[int], budget: float, flow_steps: int,
         grow: str) -> dict[str, Any]:
     """Build and time one size (run in a child process)."""
-    import granflow as gf
-
     st = tiled(n_target, flow_steps, grow)
-    x, v, w, d = st["x"], st["v"], st["omega"], st["d"]
     nx, ny, nz = st["copies"]
-    n = len(d)
+    n = len(st["d"])
     width, height, depth = st["hi"]
-    law = gf.ContactLaw(kn=cl.KN, e_n=cl.E_N, mu=cl.MU, kt=cl.KT, xi_t_ratio=0.5)
     rss0 = rss_bytes()
     t0 = time.perf_counter()
-    sim = gf.Simulation(
-        x, d, gf.Box(length=(width, height, depth), periodic=(False, True, True)), law,
-        density=cl.DENSITY, velocities=v, angular_velocities=w,
-        walls=[gf.Wall(0, 0.0, 1.0), gf.Wall(0, width, -1.0)], wall_law=law,
-        gravity=(0.0, -cl.G, 0.0), dt=cl.DT, skin=cl.SKIN, threads=threads[0],
-    )  # fmt: skip
+    sim = cl.gf_sim(st, None, threads=threads[0])  # the workload's restitution law
     sim.core.run(20)  # set-up evaluation, first rebuilds and history allocations
     t_build = time.perf_counter() - t0
     rss1 = rss_bytes()

@@ -37,6 +37,7 @@ import numpy as np
 
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
+from state_sim import simulation  # noqa: E402
 from tiling import pair_counts, tile  # noqa: E402
 
 OUT = HERE / "out"
@@ -92,17 +93,13 @@ def build(name: str, st: dict[str, Any], threads: int) -> Any:
     along -y, the gas fully periodic."""
     import granflow as gf
 
-    law = gf.ContactLaw(**st["law"])
-    common = dict(density=st["density"], velocities=st["v"], angular_velocities=st["omega"],
-                  dt=st["dt"], skin=st["skin"], threads=threads)  # fmt: skip
-    if name == "channel":
-        width = float(st["hi"][0])
-        return gf.Simulation(
-            st["x"], st["d"], gf.Box(length=tuple(st["hi"]), periodic=(False, True, True)), law,
-            walls=[gf.Wall(0, 0.0, 1.0), gf.Wall(0, width, -1.0)], wall_law=law,
-            gravity=(0.0, -st["gravity"], 0.0), **common,
-        )  # fmt: skip
-    return gf.Simulation(st["x"], st["d"], gf.Box(length=tuple(st["hi"])), law, **common)
+    geometry: dict[str, Any] = {}
+    if name == "channel":  # tiled along y and z only, so the walls stay at 0 and W
+        geometry = {"periodic": (False, True, True),
+                    "walls": [(0.0, 1.0), (float(st["hi"][0]), -1.0)]}
+    return simulation({**st, **geometry}, gf.ContactLaw(**st["law"]), density=st["density"],
+                      dt=st["dt"], skin=st["skin"], gravity=st["gravity"] or None,
+                      threads=threads)  # fmt: skip
 
 
 def digest(sim: Any) -> str:
