@@ -49,7 +49,7 @@ def main() -> None:
         return np.array([phi[xi >= a.plug].mean(), phi[(xi >= 3) & (xi < 12)].mean(),
                          phi[xi < 3].mean()])
 
-    q = ach._window_quantities(prof)
+    q = ach.window_quantities(prof)
     ph = prof.window_series(phis)
     step = max(1, round(a.every / prof.window_dt))
     for i in range(0, len(ph), step):

@@ -545,9 +545,10 @@ class SteadyCheck:
         return self.stationarity.tested and not self.stationarity.stationary
 
 
-def _window_quantities(prof: ChannelProfiles) -> dict[str, FloatArray]:
-    """STEADY_QUANTITIES of each steady window (as :func:`velocity_scaling` and
-    :func:`summary` define them on the averages)."""
+def window_quantities(prof: ChannelProfiles) -> dict[str, FloatArray]:
+    """The STEADY_QUANTITIES of each steady window of ``prof`` (as :func:`velocity_scaling`
+    and :func:`summary` define them on the averages), a series per quantity: what
+    :func:`steady_check` tests for drift and takes its correlation times from."""
     width = prof.width_full
 
     def fn(m: Mapping[str, FloatArray]) -> FloatArray:
@@ -567,7 +568,7 @@ def steady_check(prof: ChannelProfiles, *, z_max: float = DRIFT_Z) -> SteadyChec
     """The thirds test and the correlation times of the STEADY_QUANTITIES of ``prof``'s steady
     windows (:class:`SteadyCheck`): a run whose thirds differ by more than ``z_max`` of their
     SEs drifts (the flow_state trend test sees only |v_cm| over the last half)."""
-    ser = _window_quantities(prof)
+    ser = window_quantities(prof)
     st = stationarity(ser, z_max=z_max)
     n = min(v.size for v in ser.values())
     tau = {k: math.nan for k in ser}
