@@ -45,9 +45,7 @@ def tiled(n_target: int, flow_steps: int, grow: str) -> dict[str, Any]:
     ``compare_lammps.channel_state`` returns, plus ``copies``)."""
     st = cl.channel_state(flow_steps)
     ta, tb = pair_counts(n_target, len(st["x"]))
-    out = tile(st, (ta, tb, 1) if grow == "WH" else (1, ta, tb))
-    width = out["hi"][0]
-    return {**out, "walls": [(0.0, 1.0), (width, -1.0)]}
+    return tile(st, (ta, tb, 1) if grow == "WH" else (1, ta, tb))
 
 
 def steps_for(budget: float, n: int) -> int:

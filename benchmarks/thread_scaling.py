@@ -60,7 +60,8 @@ def prepare() -> None:
     st = cl.channel_state()
     law = {"kn": cl.KN, "e_n": cl.E_N, "mu": cl.MU, "kt": cl.KT, "xi_t_ratio": 0.5}
     np.savez(STATES["channel"], x=st["x"], v=st["v"], omega=st["omega"], d=st["d"],
-             hi=st["hi"], law=json.dumps(law), dt=cl.DT, skin=cl.SKIN, density=cl.DENSITY,
+             hi=st["hi"], periodic=st["periodic"], walls=np.asarray(st["walls"], float),
+             law=json.dumps(law), dt=cl.DT, skin=cl.SKIN, density=cl.DENSITY,
              gravity=cl.G)  # fmt: skip
     mean_volume = math.pi / 6.0  # diameters uniform in [0.9, 1.1]: <d^3> = 1.01
     side = (GAS_N * 1.01 * mean_volume / GAS_PHI) ** (1.0 / 3.0)
@@ -73,8 +74,8 @@ def prepare() -> None:
     skin = gas.mat.skin if gas.mat.skin is not None else kernel_default_skin()
     np.savez(STATES["gas"], x=core.positions(), v=core.velocities(),
              omega=core.angular_velocities(), d=core.diameters(), hi=np.full(3, side),
-             law=json.dumps(law), dt=core.dt, skin=skin, density=gas.mat.density,
-             gravity=0.0)  # fmt: skip
+             periodic=(True, True, True), walls=np.zeros((0, 2)), law=json.dumps(law),
+             dt=core.dt, skin=skin, density=gas.mat.density, gravity=0.0)  # fmt: skip
     for name, f in STATES.items():
         z = np.load(f)
         print(f"{name}: N = {len(z['d'])}, box {z['hi']}, dt = {float(z['dt']):.3g} -> {f}")
@@ -82,22 +83,22 @@ def prepare() -> None:
 
 def load(name: str) -> dict[str, Any]:
     z = np.load(STATES[name])
+    if "walls" not in z.files:
+        raise SystemExit(f"{STATES[name]} predates the stored geometry: run `prepare` again")
     return {k: z[k] for k in ("x", "v", "omega", "d", "hi")} | {
+        "periodic": tuple(bool(b) for b in z["periodic"]),
+        "walls": [(float(p), float(s)) for p, s in z["walls"]],
         "law": json.loads(str(z["law"])), "dt": float(z["dt"]), "density": float(z["density"]),
         "skin": float(z["skin"]), "gravity": float(z["gravity"]),
     }  # fmt: skip
 
 
-def build(name: str, st: dict[str, Any], threads: int) -> Any:
-    """The granflow simulation of a (tiled) state: the channel with its two walls and gravity
-    along -y, the gas fully periodic."""
+def build(st: dict[str, Any], threads: int) -> Any:
+    """The granflow simulation of a (tiled) state, with the geometry, law and gravity it was
+    prepared with (the channel: two walls and gravity along -y; the gas: fully periodic)."""
     import granflow as gf
 
-    geometry: dict[str, Any] = {}
-    if name == "channel":  # tiled along y and z only, so the walls stay at 0 and W
-        geometry = {"periodic": (False, True, True),
-                    "walls": [(0.0, 1.0), (float(st["hi"][0]), -1.0)]}
-    return simulation({**st, **geometry}, gf.ContactLaw(**st["law"]), density=st["density"],
+    return simulation(st, gf.ContactLaw(**st["law"]), density=st["density"],
                       dt=st["dt"], skin=st["skin"], gravity=st["gravity"] or None,
                       threads=threads)  # fmt: skip
 
@@ -116,7 +117,7 @@ def time_size(name: str, base: dict[str, Any], n_target: float, threads: list[in
     st = tile(base, counts)
     n = len(st["d"])
     t0 = time.perf_counter()
-    sim = build(name, st, max(threads))
+    sim = build(st, max(threads))
     sim.core.run(20)  # first rebuilds and history allocations
     build_s = time.perf_counter() - t0
     steps = int(min(2000, max(50, budget / n)))
@@ -139,7 +140,7 @@ def same_bits(name: str, base: dict[str, Any], n_target: float, most: int) -> di
     st = tile(base, (1, *pair_counts(n_target, len(base["d"]))))
     out = {}
     for t in (1, most):
-        sim = build(name, st, t)
+        sim = build(st, t)
         sim.core.run(SAME_BITS_STEPS)
         out[str(t)] = digest(sim)
     return {"state": name, "n": len(st["d"]), "steps": SAME_BITS_STEPS, "digests": out,
