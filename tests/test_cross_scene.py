@@ -5,6 +5,7 @@ channel dataset."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -181,6 +182,19 @@ def test_the_report_on_a_channel_dataset_without_wide_runs_says_so(tmp_path):
     text = report.read_text()
     assert "**No run at W >= 60**: the wide-channel target is not tested here." in text
     assert "Cannot tell: no run at W >= 60" in text
+    # the held amplitude is tested on every run but the one it was fitted on: the reference
+    # point's other replicas too, each point once with its replicas' range
+    held = next(line for line in text.splitlines()
+                if line.startswith("* **One amplitude, held, predicts"))
+    assert "at W = 40, phi_bar = 0.6, 2 runs" in held
+    assert "at W = 20, phi_bar = 0.6, 3 runs" in held
+    local = next(line for line in text.splitlines()
+                 if line.startswith("* **The local law cannot make"))
+    assert "in W = 20, phi_bar = 0.6, 3 runs (" in local
+    # a range whose ends print alike prints once; a trend over one phi_bar is not a NaN slope
+    assert not re.search(r"(?<![\d.])(\d[\d.]*%?)-\1(?![\d.%])", text)
+    assert "against phi_bar: one value of phi_bar only, no slope" in text
+    assert "nan ± nan" not in text
 
 
 @pytest.fixture(scope="module")

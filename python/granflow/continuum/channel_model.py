@@ -487,6 +487,8 @@ class Prediction:
     relaxed: int = 0
     #: the models with each run's own phi profile (:func:`dem_phi_table`)
     dem_phi: pl.DataFrame = field(default_factory=pl.DataFrame)
+    #: the run the amplitude was fitted on, (W, phi_bar, seed); None for a given A
+    reference: tuple[float, float, int | None] | None = None
 
     @property
     def A(self) -> float:
@@ -590,4 +592,5 @@ def _predict(points: pl.DataFrame, channel: str | os.PathLike[str], n_band: int,
             f"{r['nonlocal_best_u_rel']:.3f})")
     dem = dem_phi_table(cal, cases, ref)
     return Prediction(cal, constants, cases_tab, pc.zones, pc.profiles, pc.residuals, boundary,
-                      time.perf_counter() - t0, dem_phi=dem)
+                      time.perf_counter() - t0, dem_phi=dem,
+                      reference=None if ref is None else (ref.W, ref.phi_bar, ref.seed))

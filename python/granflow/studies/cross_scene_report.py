@@ -43,7 +43,7 @@ from granflow.continuum.verdict import (
 )
 from granflow.errors import ParameterError
 
-from ._campaign import core_seconds, md_table, pm_column
+from ._campaign import core_seconds, md_table, pm_column, span
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import is_current, with_defaults
 from .cross_scene_report_bulk import bulk_lines
@@ -188,10 +188,12 @@ def _misfit_table(c: pl.DataFrame) -> pl.DataFrame:
                     pl.col("A_best").alias("own best A"))
 
 
-def _boundary_table(b: pl.DataFrame) -> pl.DataFrame:
+def _boundary_table(b: pl.DataFrame, reference: tuple[float, float, int | None] | None
+                    ) -> pl.DataFrame:
     """Per boundary bin: the amplitude fitted on the reference run, the spread of the runs'
-    own best amplitudes and the misfits with each and with the reference's held."""
-    ref = (pl.col("W") == A_WIDTH) & (pl.col("phi_bar") == A_PHI_BAR)
+    own best amplitudes and the misfits with each and with the reference's held (the other
+    runs, the reference's replicas among them)."""
+    ref = _is_ref(reference)
     return b.group_by("bin", "x0").agg(
         pl.col("A_ref").first().alias("A (fitted at the reference)"),
         pl.col("A_best").min().alias("own best A: min"),
@@ -211,8 +213,9 @@ def dem_phi_lines(pred: Prediction) -> list[str]:
         return []
     bound = pred.boundary.filter(pl.col("bin") == 0)
     spread = {"the model's phi(I)": bound["A_best"], "the DEM's phi": d["A_best"]}
-    held = {"the model's phi(I)": pred.cases.filter(~_is_ref())["nonlocal_u_rel"],
-            "the DEM's phi": d.filter(~_is_ref())["nonlocal_u_rel"]}
+    ref = _is_ref(pred.reference)
+    held = {"the model's phi(I)": pred.cases.filter(~ref)["nonlocal_u_rel"],
+            "the DEM's phi": d.filter(~ref)["nonlocal_u_rel"]}
     a_ref = float(d["A_ref"][0])
     ratio = {k: float(v.max()) / float(v.min()) for k, v in spread.items()}  # type: ignore[arg-type]
     base = math.log(ratio["the model's phi(I)"])
@@ -254,8 +257,29 @@ def _reference(cases: list[ChannelCase]) -> ChannelCase | None:
         return None
 
 
-def _is_ref() -> pl.Expr:
-    return (pl.col("W") == A_WIDTH) & (pl.col("phi_bar") == A_PHI_BAR)
+def _is_ref(reference: tuple[float, float, int | None] | None) -> pl.Expr:
+    """The row of the run the amplitude was fitted on (:attr:`Prediction.reference`; its
+    replicas are held runs like any other); none for a given amplitude."""
+    if reference is None:
+        return pl.lit(False)
+    W, phi_bar, seed = reference
+    return ((pl.col("W") == W) & (pl.col("phi_bar") == phi_bar)
+            & pl.col("seed").eq_missing(pl.lit(seed, dtype=pl.Int64)))
+
+
+def _per_point(df: pl.DataFrame, col: str, label: str, spec: str,
+               by: tuple[str, ...] = ("W", "phi_bar")) -> str:
+    """``col`` per point (the columns ``by``) of ``df``'s runs, each as ``label`` filled with
+    its value (:func:`span` of its replicas') and where it is ("W = 20, 3 runs" for several
+    replicas), in ``df``'s order; "; " between the points where any has replicas."""
+    parts, several = [], False
+    for key, g in df.group_by(list(by), maintain_order=True):
+        v = g[col]
+        where = ", ".join(f"{k} = {x:g}" for k, x in zip(by, key, strict=True))
+        several |= g.height > 1
+        parts.append(label.format(span(_float(v.min()), _float(v.max()), spec),
+                                  where + (f", {g.height} runs" if g.height > 1 else "")))
+    return ("; " if several else ", ").join(parts)
 
 
 def findings(pred: Prediction) -> list[str]:
@@ -270,12 +294,10 @@ def findings(pred: Prediction) -> list[str]:
         out.append(
             f"* **The local law cannot make the narrow channels flow.** The stress ratio of the "
             f"wall bin stays below the cell's yield ratio mu_s = {ms:.3f} in "
-            + ", ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g} ({r['mu_wall']:.3f})"
-                        for r in below.iter_rows(named=True))
+            + _per_point(below, "mu_wall", "{1} ({0})", ".3f")
             + ": the local model predicts a rigid plug sliding at u_slip (u_max - u_slip = "
-            + ", ".join(f"{r['local_du']:.3g}" for r in below.iter_rows(named=True))
-            + " against the DEM's "
-            + ", ".join(f"{r['dem_du']:.3g}" for r in below.iter_rows(named=True)) + ").")
+            + _per_point(below, "local_du", "{0}", ".3g") + " against the DEM's "
+            + _per_point(below, "dem_du", "{0}", ".3g") + ").")
     for model in MODELS:
         zz = z.filter(pl.col("model") == model).group_by("zone").agg(
             pl.col("u_rel").mean(), pl.col("log_dudx").mean(), pl.col("phi").mean())
@@ -283,26 +305,25 @@ def findings(pred: Prediction) -> list[str]:
         out.append(f"* **{model}**, averaged over the runs, per zone: " + "; ".join(
             f"{k}: u {d[k]['u_rel']:.3f}, log10 du/dx {d[k]['log_dudx']:.2f}, phi "
             f"{d[k]['phi']:.3f}" for k in ZONES if k in d) + ".")
-    held = c.filter(~((pl.col("W") == A_WIDTH) & (pl.col("phi_bar") == A_PHI_BAR)))
+    held = c.filter(~_is_ref(pred.reference))
     if held.height:
         a_lo, a_hi = _float(c["A_best"].min()), _float(c["A_best"].max())
         out.append(
-            f"* **One amplitude, held, predicts the other runs to "
-            f"{_float(held['nonlocal_u_rel'].min()):.0%}-{_float(held['nonlocal_u_rel'].max()):.0%}"
-            f" of u_max - u_slip** (RMS over the half channel; the local law: "
-            f"{_float(held['local_u_rel'].min()):.0%}-{_float(held['local_u_rel'].max()):.0%}): "
-            + ", ".join(f"{r['nonlocal_u_rel']:.3f} at W = {r['W']:g}, phi_bar = "
-                        f"{r['phi_bar']:g}" for r in held.iter_rows(named=True))
+            "* **One amplitude, held, predicts the other runs to "
+            + span(_float(held["nonlocal_u_rel"].min()), _float(held["nonlocal_u_rel"].max()),
+                   ".0%")
+            + " of u_max - u_slip** (RMS over the half channel; the local law: "
+            + span(_float(held["local_u_rel"].min()), _float(held["local_u_rel"].max()), ".0%")
+            + "): " + _per_point(held, "nonlocal_u_rel", "{} at {}", ".3f")
             + f". But the amplitude does not carry over: each run's own best A lies between "
             f"{a_lo:.2f} and {a_hi:.2f} (against A = {pred.A:.3f} ± {pred.A_se:.3f} from the "
             "calibration's uncertainty), and with it every run is fitted to "
             f"{_float(c['nonlocal_best_u_rel'].max()):.0%} or better. By width, at phi_bar = "
-            f"{A_PHI_BAR:g}: " + ", ".join(
-                f"A = {r['A_best']:.2f} (W = {r['W']:g})"
-                for r in c.filter(pl.col("phi_bar") == A_PHI_BAR).iter_rows(named=True))
-            + f"; by phi_bar, at W = {A_WIDTH:g}: " + ", ".join(
-                f"A = {r['A_best']:.2f} (phi_bar = {r['phi_bar']:g})"
-                for r in c.filter(pl.col("W") == A_WIDTH).iter_rows(named=True))
+            f"{A_PHI_BAR:g}: " + _per_point(c.filter(pl.col("phi_bar") == A_PHI_BAR),
+                                            "A_best", "A = {} ({})", ".2f", ("W",))
+            + f"; by phi_bar, at W = {A_WIDTH:g}: "
+            + _per_point(c.filter(pl.col("W") == A_WIDTH), "A_best", "A = {} ({})", ".2f",
+                         ("phi_bar",))
             + ". Fitted to whole profiles, the cooperativity length the channel needs is "
             "not one material constant with this local law and these boundary data; read "
             "off the bulk alone, the amplitude varies far less (section 'The amplitude "
@@ -338,7 +359,7 @@ def findings(pred: Prediction) -> list[str]:
                         for row in c.iter_rows(named=True))
             + " of the DEM's mass (nonlocal) with the DEM's sigma_xx. A plug compacted above "
             "the critical state (as 000 finds) is outside any phi(I) law.")
-    bt = _boundary_table(pred.boundary)
+    bt = _boundary_table(pred.boundary, pred.reference)
     if bt.height > 1:
         r0, rn = bt.row(0, named=True), bt.row(bt.height - 1, named=True)
         out.append(
@@ -505,7 +526,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "The nonlocal model with its boundary data (u and the fluidity) from bin k instead of "
         "the wall bin; A refitted on the reference run for each k, the misfits over the bins "
         "past k (so the columns compare the amplitude's transfer, not the models' reach):", "",
-        md_table(_boundary_table(pred.boundary), {"x0": ".2f"}), "",
+        md_table(_boundary_table(pred.boundary, pred.reference), {"x0": ".2f"}), "",
         *dem_phi_lines(pred),
         *bulk_lines(cases, pred.cal, _reference(cases), pred.residuals, out,
                     figdir / "bulk_amplitude.png", rel, pred.cases),

@@ -27,6 +27,7 @@ from granflow.continuum.channel_model import (
 from granflow.continuum.cooperativity import (
     G_FLOOR,
     X_BULK,
+    Trend,
     amplitude_profile,
     bulk_table,
     layer_table,
@@ -47,7 +48,7 @@ from granflow.continuum.wall_layer import (
     predict_layered,
 )
 
-from ._campaign import md_table, pm_column
+from ._campaign import md_table, pm_column, span
 
 #: |z| above which a trend counts as measured (2 SE)
 Z_TREND = 2.0
@@ -138,6 +139,13 @@ def plot_amplitude(bins: pl.DataFrame, table: pl.DataFrame, path: Path) -> Path:
     fig.suptitle("the nonlocal amplitude measured in the DEM, bin by bin (filled: the bulk "
                  f"window: x >= {X_BULK:g} d, g* >= {G_FLOOR:g}, mu < mu_s)")
     return save_figure(fig, path)
+
+
+def _slope_words(t: Trend, unit: str) -> str:
+    """A trend's slope with its SE and z, or why there is none (one value of its variable)."""
+    if not math.isfinite(t.slope):
+        return f"one value of {t.against} only, no slope"
+    return f"slope {t.slope:.2g} ± {t.se:.1g}{' ' + unit if unit else ''} (z = {t.z:.1f})"
 
 
 def _trend_word(z: float) -> str:
@@ -250,7 +258,8 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
                              "single runs: no replica SE yet")
         + "); mu_s (free line): where a line with "
         "a free intercept reaches zero decay, against the cell's mu_s = "
-        f"{have['mu_s'].to_numpy().min():.3f}-{have['mu_s'].to_numpy().max():.3f}:", "",
+        + span(float(have["mu_s"].min()), float(have["mu_s"].max()), ".3f")  # type: ignore[arg-type]
+        + ":", "",
         md_table(shown), "",
         f"* **Bulk amplitude: {own.min():.3f}-{own.max():.3f} "
         f"(x{own.max() / own.min():.2f})**, weighted mean {tw.mean:.3f} ± "
@@ -258,13 +267,14 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
         f"Chi2/dof of the runs about that mean: {tw.chi2_dof:.2f}. The lines with a free "
         f"intercept reach zero decay at mu = {np.nanmin(free):.2f}-{np.nanmax(free):.2f}, "
         "about the cell's mu_s: the bulk creeps as the cell's yield ratio has it.",
-        f"* Against W: slope {tw.slope:.2g} ± {tw.se:.1g} per d (z = {tw.z:.1f}); against "
-        f"phi_bar: {tp.slope:.2g} ± {tp.se:.1g} (z = {tp.z:.1f}); against the bins' own phi "
+        f"* Against W: {_slope_words(tw, 'per d')}; against phi_bar: "
+        f"{_slope_words(tp, '')}; against the bins' own phi "
         f"(pooled window bins): {slope:.2g} ± {slope_se:.2g} (z = "
         f"{slope / slope_se:.1f}). With SEs from single runs the bulk amplitude "
-        f"{_trend_word(tw.z)} with W and {_trend_word(tp.z)} with phi_bar"
-        + (f"; with the SEs scaled by sqrt(chi2/dof) the z-values are "
-           f"{tw.z / math.sqrt(tw.chi2_dof):.1f} and {tp.z / math.sqrt(tp.chi2_dof):.1f}"
+        + " and ".join(f"{_trend_word(t.z)} with {t.against}" for t in (tw, tp)
+                       if math.isfinite(t.z))
+        + ("; with the SEs scaled by sqrt(chi2/dof) the z-values are " + " and ".join(
+            f"{t.z / math.sqrt(t.chi2_dof):.1f}" for t in (tw, tp) if math.isfinite(t.z))
            if tw.chi2_dof > 1 else "")
         + ". A phi-dependent cooperativity (the extension the issue suggests) would show as "
         "a slope in the bins' own phi (its SE from the three sets of every third bin, "

@@ -1,4 +1,4 @@
-"""What the campaigns' reports share: markdown helpers (:func:`md_table`, :func:`pm`,
+"""What the campaigns' reports share: markdown helpers (:func:`md_table`, :func:`pm`, :func:`span`,
 :func:`dask_recipe`), the SE-against-averaging-time figure (:func:`plot_campaign_se`), and the
 cost of a campaign and of a plan at the measured throughput (:func:`core_seconds`, :func:`cost`,
 :func:`paper_scale_estimate`)."""
@@ -37,6 +37,12 @@ def pm(v: float, e: float, digits: int = 3) -> str:
     if not math.isfinite(v):
         return "-"
     return f"{v:.{digits}f} ± {e:.{digits}f}" if math.isfinite(e) else f"{v:.{digits}f}"
+
+
+def span(lo: float, hi: float, spec: str = ".3g") -> str:
+    """The range ``lo``-``hi`` formatted with ``spec``; one value where both format alike."""
+    a, b = format(lo, spec), format(hi, spec)
+    return a if a == b else f"{a}-{b}"
 
 
 def pm_column(value: str, se: str, name: str, digits: int = 4) -> pl.Expr:
