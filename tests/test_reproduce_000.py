@@ -36,6 +36,9 @@ def test_points_stop_by_the_stated_criterion(quick):
         t_max, min_average = plan.limits(point)
         # these small channels flow (a drifting one runs on to t_max)
         assert r["state"] in ("steady", "fluctuating", "drifting"), r
+        # v_cm's state (000's) is kept where a drifting mean overrides the run's state
+        assert r["vcm_state"] in ("steady", "fluctuating")
+        assert r["state"] in ("drifting", r["vcm_state"])
         assert r["converged"] or r["t_run"] >= t_max - 1e-6
         if r["converged"]:
             # the minimum length first, then the SE targets

@@ -334,10 +334,30 @@ def test_the_verdicts_on_000s_claims():
     assert got["δ0.95 ∝ W (W ≥ 100)"] == "holds"
     assert got["states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above"] == \
         "does not hold"
+    # 000's states are v_cm's: a run whose mean drifts is judged by its v_cm state, and a
+    # drifting row without one (from before vcm_state) is not judged
+    states = "states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above"
+    drift = points.with_columns(state=pl.lit("drifting"), vcm_state=pl.lit("steady"))
+    tab = verdicts(drift, values).filter(pl.col("claim (000)") == states)
+    assert tab["verdict"][0] == "holds" and tab["measured here"][0] == "6 of 6 runs as 000"
+    tab = verdicts(drift.with_columns(vcm_state=pl.lit("fluctuating")), values)
+    assert tab.filter(pl.col("claim (000)") == states)["verdict"][0] == "does not hold"
+    tab = verdicts(drift.drop("vcm_state"), values).filter(pl.col("claim (000)") == states)
+    assert tab["verdict"][0] == "cannot tell at this scale", tab
     # no channel at 000's widths: nothing can be told
     narrow = values.with_columns(pl.col("W") / 10)
     tab = verdicts(points.with_columns(pl.col("W") / 10), narrow)
     assert (tab["verdict"] == "cannot tell at this scale").all(), tab
+    # a wide run that ran but drifts is named in the reason, with its measure
+    ran = pl.DataFrame({"W": [100.0], "phi_bar": [0.6], "parent": [""], "state": ["drifting"],
+                        "t_end": [3200.0], "drift_z": [6.0], "drift_quantity": ["u_slip"],
+                        "tau_max": [589.0], "T_avg": [1200.0]})
+    tab = verdicts(pl.concat([points.with_columns(pl.col("W") / 10), ran],
+                             how="diagonal_relaxed"), narrow)
+    why = tab.filter(pl.col("claim (000)") == "u_slip ∝ √W (W ≥ 100)")["why"][0]
+    assert why.startswith("the widest steady channel here is W = 15; W = 100 ran to "
+                          "t = 3200 but drifts (u_slip: |z| = 6.0 by the thirds test; its "
+                          "slowest correlation time 589 against 1200 averaged)"), why
 
 
 def test_phi_ad_holds_only_at_000s_widths_and_where_the_fit_resolves_its_002():
@@ -525,6 +545,21 @@ def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path)
     assert "carries" not in "\n".join(remaining(tmp_path, rp.widths_plan(), 4e6))
     # (the full plan runs width by width: no phi_bar piece comes first)
     assert "which the plan runs first" not in text
+
+
+def test_the_runs_left_say_where_the_cap_cannot_hold_the_rules_correlation_times():
+    from granflow.studies.reproduce_000_report_cost import tau_floor
+
+    plan = rp.widths_plan()  # t = 2000-3200: 1200 of averaging, 20 correlation times
+    pts = pl.DataFrame({"W": [20.0, 20.0, 100.0], "parent": ["", "", ""],
+                        "tau_max": [7.0, 13.0, 589.0]})
+    text = "\n".join(tau_floor(pts, plan))
+    assert "at most 1200 time units (t = 2000-3200)" in text
+    assert "W = 20: τ 7-13 (20 τ = 140-260, 2 runs); W = 100: τ 589 (20 τ = 11780, 1 run)" \
+        in text
+    assert "At W = 100 that is more than the cap allows" in text
+    assert "more than the cap" not in "\n".join(tau_floor(pts.head(2), plan))
+    assert tau_floor(pts.drop("tau_max"), plan) == []
 
 
 def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():

@@ -309,7 +309,9 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table,
     if t.size < 100:
         return row
     fs = flow_state(series, n_particles=n)
-    row.update(state=fs.state, t_end=float(t[-1]), vcm_tail=fs.v_mean,
+    # (vcm_state keeps the v_cm classification, 000's states, where a drifting mean
+    # overrides state below)
+    row.update(state=fs.state, vcm_state=fs.state, t_end=float(t[-1]), vcm_tail=fs.v_mean,
                rel_amplitude=fs.rel_amplitude, rel_drift=fs.rel_drift)
     t_dev = plan.t_dev_of(point)
     if not fs.is_steady or (t_dev and not plan.reached_least(point, float(t[-1]))):

@@ -877,6 +877,15 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     widest = float(st["W"].max()) if st.height else math.nan  # type: ignore[arg-type]
     scale_why = (f"the widest steady channel here is W = {widest:g}" if st.height
                  else "no steady point")
+    # a wider run that ran but whose mean drifts is named, with its measure
+    drifts = drifting(points).filter(pl.col("W") > (widest if st.height else 0.0)) \
+        if points.height and "drift_z" in points.columns else points.clear()
+    if drifts.height:
+        scale_why += "; " + ", ".join(
+            f"W = {r['W']:g} ran to t = {r['t_end']:.0f} but drifts ({r['drift_quantity']}: "
+            f"|z| = {r['drift_z']:.1f} by the thirds test; its slowest correlation time "
+            f"{r['tau_max']:.0f} against {r['T_avg']:.0f} averaged)"
+            for r in drifts.sort("W").iter_rows(named=True))
     # the scaling exponents between the two widest widths >= 100, per phi_bar, pooled
     for raw, name, n0 in (("u_slip", "u_slip ∝ √W", 0.5), ("u_max", "u_max ∝ √W", 0.5),
                           ("delta_095", "δ0.95 ∝ W", 1.0)):
@@ -974,13 +983,19 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         if points.height else points
     if flow.height:
         want = {0.59: "steady", 0.60: "steady", 0.61: "steady", 0.62: "fluctuating"}
-        seen = [(r["W"], r["phi_bar"], r["state"]) for r in flow.iter_rows(named=True)
-                if round(r["phi_bar"], 2) in want]
+        # 000's states are those of v_cm's fluctuations: a run whose mean drifts keeps its
+        # v_cm state in vcm_state (a row from before that column: its state, unless drifting)
+        seen = [(r["W"], r["phi_bar"], r.get("vcm_state") or r["state"])
+                for r in flow.iter_rows(named=True) if round(r["phi_bar"], 2) in want
+                and (r.get("vcm_state") or r["state"] != FlowState.DRIFTING.value)]
         miss = [(w, p, st_) for w, p, st_ in seen if st_ != want[round(p, 2)]]
         add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
             "steady / fluctuating / jammed", f"{len(seen) - len(miss)} of {len(seen)} runs "
-            "as 000", "holds" if not miss else "does not hold",
-            "; ".join(f"W = {w:g}, φ̄ = {p:g}: {st_}" for w, p, st_ in miss) or "-")
+            "as 000", "cannot tell at this scale" if not seen else
+            "holds" if not miss else "does not hold",
+            "; ".join(f"W = {w:g}, φ̄ = {p:g}: {st_}" for w, p, st_ in miss)
+            or ("no run's v_cm state recorded" if not seen else "φ̄ tested: " + ", ".join(
+                f"{p:g}" for p in sorted({p for _, p, _ in seen}))))
     else:
         add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
             "steady / fluctuating / jammed", "-", "cannot tell at this scale",

@@ -10,7 +10,14 @@ from typing import Any
 
 import polars as pl
 
-from ._campaign import cost, dask_recipe, md_table, paper_scale_estimate, run_seconds
+from ._campaign import (
+    cost,
+    dask_recipe,
+    md_table,
+    paper_scale_estimate,
+    run_seconds,
+    span,
+)
 from ._campaign.engine import kept_dir
 
 
@@ -147,6 +154,7 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
             md_table(tab, {"W": ".0f", "k_n": ".0e", "B": ".0f", "rate": ".3g",
                            "core-hours (least)": ".1f", "core-hours (cap)": ".1f",
                            "longest run (h, 1 core)": ".1f"}), "",
+            *tau_floor(pl.read_parquet(f) if f.exists() else pl.DataFrame(), plan),
             f"About {lo:.0f}-{hi:.0f} core-hours: {lo / 6:.0f}-{hi / 6:.0f} sessions of 3 h "
             "on this 2-core machine"
             + (f"; of these, φ̄ = {head.phi_bar:g} at every width (B = {head.B:g}), which the "
@@ -157,6 +165,34 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
             f"{longest:.0f} h on one core, so the jobs' walltime below:", "",
             *dask_recipe("granflow.studies.reproduce_000", f"{out}",
                          f"{math.ceil(1.25 * longest):d}:00:00", plan.name)]
+
+
+def tau_floor(points: pl.DataFrame, plan: Any) -> list[str]:
+    """What the cap leaves the stop rule: per width, the finished runs' slowest correlation
+    time (``tau_max``, from their steady parts) and the averaging its floor of
+    ``plan.min_taus`` of them asks, against the averaging the cap allows (t_max - t_dev).
+    Report lines; none without a run that measured it."""
+    if not points.height or "tau_max" not in points.columns:
+        return []
+    t = points.filter((pl.col("parent") == "") & pl.col("tau_max").is_finite())
+    if not t.height:
+        return []
+    room = plan.t_max - (plan.t_dev or 0.0)
+    words, short = [], []
+    for (w,), g in t.group_by(["W"]):
+        lo, hi = float(g["tau_max"].min()), float(g["tau_max"].max())  # type: ignore[arg-type]
+        need = (plan.min_taus * lo, plan.min_taus * hi)
+        words.append((w, f"W = {w:g}: τ {span(lo, hi, '.0f')} ({plan.min_taus:g} τ = "
+                         f"{span(*need, '.0f')}, {g.height} run{'s' if g.height > 1 else ''})"))
+        if need[1] > room:
+            short.append(f"{w:g}")
+    return [f"What the cap leaves the stop rule: it averages at most {room:g} time units "
+            f"(t = {plan.t_dev or 0.0:g}-{plan.t_max:g}) and asks for {plan.min_taus:g} "
+            "correlation times of the slowest quantity; the finished runs measure "
+            + "; ".join(x for _, x in sorted(words))
+            + (f". At W = {', '.join(short)} that is more than the cap allows: a run there ends "
+               "at the cap without the rule's SE unless the cap is raised." if short
+               else "."), ""]
 
 
 def cost_section(points: pl.DataFrame, paper: Any) -> tuple[list[str], float]:
