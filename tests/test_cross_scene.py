@@ -480,3 +480,17 @@ def test_the_amplitudes_per_point_are_replica_means_and_their_trend_is_tested():
     # one replica per point: nothing at the replica level
     assert replica_amplitude_lines(best.filter(pl.col("seed") == 1),
                                    bulk.filter(pl.col("seed") == 1)) == []
+
+
+def test_the_trend_sentence_leaves_out_a_trend_over_one_value():
+    from granflow.continuum.cooperativity import Trend
+    from granflow.studies.cross_scene_report_bulk import _trends_sentence
+
+    nan = math.nan
+    tw = Trend("W", 0.004, 0.001, 4.0, 0.45, 0.01, 4.0)
+    tp = Trend("phi_bar", nan, nan, nan, 0.45, 0.01, 4.0)
+    text = _trends_sentence(tw, tp)
+    assert "**trends** with W" in text and "phi_bar" not in text and "nan" not in text
+    assert text.endswith("the z-values are 2.0")
+    none = _trends_sentence(Trend("W", nan, nan, nan, 0.4, 0.01, 1.0), tp)
+    assert none == "With one value of W and one of phi_bar the bulk amplitude has no trend to test"

@@ -355,7 +355,7 @@ def test_the_verdicts_on_000s_claims():
     tab = verdicts(pl.concat([points.with_columns(pl.col("W") / 10), ran],
                              how="diagonal_relaxed"), narrow)
     why = tab.filter(pl.col("claim (000)") == "u_slip ∝ √W (W ≥ 100)")["why"][0]
-    assert why.startswith("the widest steady channel here is W = 15; W = 100 ran to "
+    assert why.startswith("the widest steady channel here is W = 15; W = 100 (φ̄ = 0.6) ran to "
                           "t = 3200 but drifts (u_slip: |z| = 6.0 by the thirds test; its "
                           "slowest correlation time 589 against 1200 averaged)"), why
 

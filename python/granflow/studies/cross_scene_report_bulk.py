@@ -148,6 +148,20 @@ def _slope_words(t: Trend, unit: str) -> str:
     return f"slope {t.slope:.2g} ± {t.se:.1g}{' ' + unit if unit else ''} (z = {t.z:.1f})"
 
 
+def _trends_sentence(*trends: Trend) -> str:
+    """What the runs' trends say, with single runs' SEs and scaled by sqrt(chi2/dof) where
+    that exceeds 1; the trends over a single value left out (none: said so)."""
+    have = [t for t in trends if math.isfinite(t.z)]
+    if not have:
+        return ("With one value of " + " and one of ".join(t.against for t in trends)
+                + " the bulk amplitude has no trend to test")
+    return ("With SEs from single runs the bulk amplitude "
+            + " and ".join(f"{_trend_word(t.z)} with {t.against}" for t in have)
+            + ("; with the SEs scaled by sqrt(chi2/dof) the z-values are " + " and ".join(
+                f"{t.z / math.sqrt(t.chi2_dof):.1f}" for t in have)
+               if have[0].chi2_dof > 1 else ""))
+
+
 def _trend_word(z: float) -> str:
     return "**trends**" if abs(z) > Z_TREND else "does not trend measurably"
 
@@ -270,12 +284,7 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
         f"* Against W: {_slope_words(tw, 'per d')}; against phi_bar: "
         f"{_slope_words(tp, '')}; against the bins' own phi "
         f"(pooled window bins): {slope:.2g} ± {slope_se:.2g} (z = "
-        f"{slope / slope_se:.1f}). With SEs from single runs the bulk amplitude "
-        + " and ".join(f"{_trend_word(t.z)} with {t.against}" for t in (tw, tp)
-                       if math.isfinite(t.z))
-        + ("; with the SEs scaled by sqrt(chi2/dof) the z-values are " + " and ".join(
-            f"{t.z / math.sqrt(t.chi2_dof):.1f}" for t in (tw, tp) if math.isfinite(t.z))
-           if tw.chi2_dof > 1 else "")
+        f"{slope / slope_se:.1f}). " + _trends_sentence(tw, tp)
         + ". A phi-dependent cooperativity (the extension the issue suggests) would show as "
         "a slope in the bins' own phi (its SE from the three sets of every third bin, "
         "whose stencils do not overlap): "

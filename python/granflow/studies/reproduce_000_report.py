@@ -882,7 +882,8 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         if points.height and "drift_z" in points.columns else points.clear()
     if drifts.height:
         scale_why += "; " + ", ".join(
-            f"W = {r['W']:g} ran to t = {r['t_end']:.0f} but drifts ({r['drift_quantity']}: "
+            f"W = {r['W']:g} (φ̄ = {r['phi_bar']:g}) ran to t = {r['t_end']:.0f} but drifts "
+            f"({r['drift_quantity']}: "
             f"|z| = {r['drift_z']:.1f} by the thirds test; its slowest correlation time "
             f"{r['tau_max']:.0f} against {r['T_avg']:.0f} averaged)"
             for r in drifts.sort("W").iter_rows(named=True))
