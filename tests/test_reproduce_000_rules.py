@@ -773,3 +773,20 @@ def test_a_committed_copy_keeps_what_the_rows_read_and_a_run_goes_on_from_it(tmp
     for s in (whole, resumed):
         s.run(round(10.0 / point.dt), progress=False)
     same(row(whole.tables()), row(resumed.tables()))
+
+
+def test_the_findings_give_a_drifting_runs_vcm_state():
+    from pathlib import Path
+
+    from granflow.studies.reproduce_000_report import findings, point_values
+
+    # the widths campaign's W = 100 run: drifting, its v_cm steady
+    d = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000_widths"
+    points = pl.read_parquet(d / "points.parquet")
+    wide = points.filter(pl.col("W") == 100)
+    assert wide["state"].to_list() == ["drifting"] and wide["vcm_state"][0] is not None
+    text = "\n".join(findings(points, point_values(points)))
+    assert f"- W = 100: φ̄ 0.6: drifting (v_cm {wide['vcm_state'][0]}) (000" in text
+    # (rows from before vcm_state: their state as it is)
+    text = "\n".join(findings(points.drop("vcm_state"), point_values(points)))
+    assert "- W = 100: φ̄ 0.6: drifting (000" in text

@@ -1043,6 +1043,12 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     steady = _steady(values).filter(~pl.col("branch")) if values.height else values
     out = ["## Findings", ""]
     flow = points.filter(pl.col("parent") == "")
+    if "vcm_state" in flow.columns:  # (a drifting run with its v_cm state, 000's)
+        flow = flow.with_columns(
+            pl.when((pl.col("state") == FlowState.DRIFTING.value)
+                    & pl.col("vcm_state").is_not_null())
+            .then(pl.format("{} (v_cm {})", "state", "vcm_state"))
+            .otherwise(pl.col("state")).alias("state"))
     for (w,), g in flow.sort("phi_bar", "seed").group_by(["W"], maintain_order=True):
         states = "; ".join(
             f"φ̄ {p:g}: " + ", ".join(f"{s}{f' x{n}' if n > 1 else ''}"
