@@ -31,7 +31,6 @@ from granflow.continuum.channel_model import (
     Prediction,
     channel_cases,
     predict,
-    reference_case,
 )
 from granflow.continuum.verdict import (
     PHI_TARGET,
@@ -41,9 +40,8 @@ from granflow.continuum.verdict import (
     verdict_table,
     zone_errors,
 )
-from granflow.errors import ParameterError
 
-from ._campaign import core_seconds, md_table, pm_column, span
+from ._campaign import core_seconds, md_table, pm_column, span_of
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import is_current, with_defaults
 from .cross_scene_report_bulk import bulk_lines
@@ -249,12 +247,10 @@ def dem_phi_lines(pred: Prediction) -> list[str]:
 GATHERED = 0.75
 
 
-def _reference(cases: list[ChannelCase]) -> ChannelCase | None:
-    """The run the amplitude is fitted on, where the channel dataset has it."""
-    try:
-        return reference_case(cases, (A_WIDTH, A_PHI_BAR))
-    except ParameterError:
-        return None
+def _reference(pred: Prediction, cases: list[ChannelCase]) -> ChannelCase | None:
+    """The run the amplitude was fitted on (:attr:`Prediction.reference`), where there is
+    one."""
+    return next((c for c in cases if (c.W, c.phi_bar, c.seed) == pred.reference), None)
 
 
 def _is_ref(reference: tuple[float, float, int | None] | None) -> pl.Expr:
@@ -274,10 +270,9 @@ def _per_point(df: pl.DataFrame, col: str, label: str, spec: str,
     replicas), in ``df``'s order; "; " between the points where any has replicas."""
     parts, several = [], False
     for key, g in df.group_by(list(by), maintain_order=True):
-        v = g[col]
         where = ", ".join(f"{k} = {x:g}" for k, x in zip(by, key, strict=True))
         several |= g.height > 1
-        parts.append(label.format(span(_float(v.min()), _float(v.max()), spec),
+        parts.append(label.format(span_of(g[col], spec),
                                   where + (f", {g.height} runs" if g.height > 1 else "")))
     return ("; " if several else ", ").join(parts)
 
@@ -310,10 +305,9 @@ def findings(pred: Prediction) -> list[str]:
         a_lo, a_hi = _float(c["A_best"].min()), _float(c["A_best"].max())
         out.append(
             "* **One amplitude, held, predicts the other runs to "
-            + span(_float(held["nonlocal_u_rel"].min()), _float(held["nonlocal_u_rel"].max()),
-                   ".0%")
+            + span_of(held["nonlocal_u_rel"], ".0%")
             + " of u_max - u_slip** (RMS over the half channel; the local law: "
-            + span(_float(held["local_u_rel"].min()), _float(held["local_u_rel"].max()), ".0%")
+            + span_of(held["local_u_rel"], ".0%")
             + "): " + _per_point(held, "nonlocal_u_rel", "{} at {}", ".3f")
             + f". But the amplitude does not carry over: each run's own best A lies between "
             f"{a_lo:.2f} and {a_hi:.2f} (against A = {pred.A:.3f} ± {pred.A_se:.3f} from the "
@@ -528,7 +522,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "past k (so the columns compare the amplitude's transfer, not the models' reach):", "",
         md_table(_boundary_table(pred.boundary, pred.reference), {"x0": ".2f"}), "",
         *dem_phi_lines(pred),
-        *bulk_lines(cases, pred.cal, _reference(cases), pred.residuals, out,
+        *bulk_lines(cases, pred.cal, _reference(pred, cases), pred.residuals, out,
                     figdir / "bulk_amplitude.png", rel, pred.cases),
         "## 4. The DEM's bins against the cell's law (000's loose-zone claim)", "",
         "Each DEM bin's mu and phi against the cell's law at the bin's own I; in range: the "

@@ -48,7 +48,7 @@ from granflow.continuum.wall_layer import (
     predict_layered,
 )
 
-from ._campaign import md_table, pm_column, span
+from ._campaign import md_table, pm_column, span_of
 
 #: |z| above which a trend counts as measured (2 SE)
 Z_TREND = 2.0
@@ -272,7 +272,7 @@ def bulk_lines(cases: Sequence[ChannelCase], cal: Mapping[float, Calibration],
                              "single runs: no replica SE yet")
         + "); mu_s (free line): where a line with "
         "a free intercept reaches zero decay, against the cell's mu_s = "
-        + span(float(have["mu_s"].min()), float(have["mu_s"].max()), ".3f")  # type: ignore[arg-type]
+        + span_of(have["mu_s"], ".3f")
         + ":", "",
         md_table(shown), "",
         f"* **Bulk amplitude: {own.min():.3f}-{own.max():.3f} "

@@ -101,7 +101,8 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
     if not left:
         return []
     f = out / "points.parquet"
-    rates = width_rates(pl.read_parquet(f) if f.exists() else pl.DataFrame())
+    finished = pl.read_parquet(f) if f.exists() else pl.DataFrame()
+    rates = width_rates(finished)
     rows: dict[tuple[float, float, float], dict[str, Any]] = {}
     # (the plan's first phi_bar at its first depth, every width: the piece it runs first,
     # where the plan's points begin with all of them)
@@ -154,7 +155,7 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
             md_table(tab, {"W": ".0f", "k_n": ".0e", "B": ".0f", "rate": ".3g",
                            "core-hours (least)": ".1f", "core-hours (cap)": ".1f",
                            "longest run (h, 1 core)": ".1f"}), "",
-            *tau_floor(pl.read_parquet(f) if f.exists() else pl.DataFrame(), plan),
+            *tau_floor(finished, plan),
             f"About {lo:.0f}-{hi:.0f} core-hours: {lo / 6:.0f}-{hi / 6:.0f} sessions of 3 h "
             "on this 2-core machine"
             + (f"; of these, φ̄ = {head.phi_bar:g} at every width (B = {head.B:g}), which the "

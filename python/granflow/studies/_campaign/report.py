@@ -1,7 +1,7 @@
 """What the campaigns' reports share: markdown helpers (:func:`md_table`, :func:`pm`, :func:`span`,
-:func:`dask_recipe`), the SE-against-averaging-time figure (:func:`plot_campaign_se`), and the
-cost of a campaign and of a plan at the measured throughput (:func:`core_seconds`, :func:`cost`,
-:func:`paper_scale_estimate`)."""
+:func:`span_of`, :func:`dask_recipe`), the SE-against-averaging-time figure
+(:func:`plot_campaign_se`), and the cost of a campaign and of a plan at the measured throughput
+(:func:`core_seconds`, :func:`cost`, :func:`paper_scale_estimate`)."""
 
 from __future__ import annotations
 
@@ -43,6 +43,11 @@ def span(lo: float, hi: float, spec: str = ".3g") -> str:
     """The range ``lo``-``hi`` formatted with ``spec``; one value where both format alike."""
     a, b = format(lo, spec), format(hi, spec)
     return a if a == b else f"{a}-{b}"
+
+
+def span_of(values: pl.Series, spec: str = ".3g") -> str:
+    """:func:`span` of ``values``' smallest and largest."""
+    return span(float(values.min()), float(values.max()), spec)  # type: ignore[arg-type]
 
 
 def pm_column(value: str, se: str, name: str, digits: int = 4) -> pl.Expr:
