@@ -317,7 +317,7 @@ def _claims_values(ratio: float, exponent: float = 0.5) -> pl.DataFrame:
 
 
 def test_the_verdicts_on_000s_claims():
-    from granflow.studies.reproduce_000_report import verdicts
+    from granflow.studies.reproduce_000_report import drift_reasons, verdicts
 
     values = _claims_values(1.385)
     points = values.select("W", "phi_bar").with_columns(parent=pl.lit(""),
@@ -348,16 +348,20 @@ def test_the_verdicts_on_000s_claims():
     narrow = values.with_columns(pl.col("W") / 10)
     tab = verdicts(points.with_columns(pl.col("W") / 10), narrow)
     assert (tab["verdict"] == "cannot tell at this scale").all(), tab
-    # a wide run that ran but drifts is named in the reason, with its measure
+    # a wide run that ran but drifts is named in the reason, its measure once below the table
     ran = pl.DataFrame({"W": [100.0], "phi_bar": [0.6], "parent": [""], "state": ["drifting"],
                         "t_end": [3200.0], "drift_z": [6.0], "drift_quantity": ["u_slip"],
-                        "tau_max": [589.0], "T_avg": [1200.0]})
-    tab = verdicts(pl.concat([points.with_columns(pl.col("W") / 10), ran],
-                             how="diagonal_relaxed"), narrow)
+                        "tau_max": [589.0], "T_avg": [1200.0], "seed": [1]})
+    both = pl.concat([points.with_columns(pl.col("W") / 10), ran], how="diagonal_relaxed")
+    tab = verdicts(both, narrow)
     why = tab.filter(pl.col("claim (000)") == "u_slip ∝ √W (W ≥ 100)")["why"][0]
-    assert why.startswith("the widest steady channel here is W = 15; W = 100 (φ̄ = 0.6) ran to "
-                          "t = 3200 but drifts (u_slip: |z| = 6.0 by the thirds test; its "
-                          "slowest correlation time 589 against 1200 averaged)"), why
+    assert why == ("the widest steady channel here is W = 15; W = 100 (φ̄ = 0.6) drifts (below "
+                   "the table) (two steady widths >= 100 needed)"), why
+    assert drift_reasons(both, narrow) == [
+        "- W = 100 (φ̄ = 0.6) ran to t = 3200 but drifts (u_slip: |z| = 6.0 by the thirds "
+        "test; its slowest correlation time 589 against 1200 averaged)."]
+    # (a drifting run narrower than a steady one is not a reason)
+    assert drift_reasons(both.with_columns(W=pl.lit(1.0)), narrow) == []
 
 
 def test_phi_ad_holds_only_at_000s_widths_and_where_the_fit_resolves_its_002():
@@ -560,6 +564,11 @@ def test_the_runs_left_say_where_the_cap_cannot_hold_the_rules_correlation_times
     assert "At W = 100 that is more than the cap allows" in text
     assert "more than the cap" not in "\n".join(tau_floor(pts.head(2), plan))
     assert tau_floor(pts.drop("tau_max"), plan) == []
+    # a depth branch at a width is its own line, named by its B where the runs' B differ
+    deep = pts.with_columns(B=pl.Series([10.0, 40.0, 10.0]))
+    text = "\n".join(tau_floor(deep, plan))
+    assert "W = 20, B = 10: τ 7 (20 τ = 140, 1 run); W = 20, B = 40: τ 13" in text, text
+    assert "At W = 100, B = 10 that is more" in text
 
 
 def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():

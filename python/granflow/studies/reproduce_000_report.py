@@ -97,6 +97,16 @@ def drifting(points: pl.DataFrame) -> pl.DataFrame:
     return points.filter(pl.col("state") == FlowState.DRIFTING.value)
 
 
+def with_state_000(points: pl.DataFrame) -> pl.DataFrame:
+    """``points`` with ``state_000``: a run's state as 000 classifies it, from v_cm's
+    fluctuations. A drifting mean overrides ``state``, so a drifting run's v_cm state is in
+    ``vcm_state``; a drifting row from before that column has none (null: not judged)."""
+    own = (pl.when(pl.col("state") != FlowState.DRIFTING.value).then(pl.col("state"))
+           .otherwise(None))
+    vcm = pl.col("vcm_state") if "vcm_state" in points.columns else pl.lit(None, pl.String)
+    return points.with_columns(state_000=pl.coalesce(vcm, own))
+
+
 def audit_factors(tab: pl.DataFrame) -> dict[str, float]:
     """Per audited quantity whose run SEs the coverage audit ``tab`` (:func:`coverage_table`)
     finds too small (the 95 % interval of rms z above 1), that rms z: the factor by which a
@@ -700,7 +710,8 @@ SE_CONVERGED = 0.75
 
 
 def _se_section(se: pl.DataFrame, figdir: Path, ruled: bool = False) -> Section:
-    """``ruled``: the dataset's runs followed the present stop rule (its minimum length in
+    """The error against run time from ``se`` (se_vs_time.parquet, less the drifting runs).
+    ``ruled``: the dataset's runs followed the present stop rule (its minimum length in
     correlation times and the 10-block rule)."""
     if not se.height:
         return [], []
@@ -857,6 +868,25 @@ def _pooled(g: pl.DataFrame, col: str) -> tuple[float, float]:
     return float(r[col]), float(r[se])
 
 
+def wider_drifts(points: pl.DataFrame, values: pl.DataFrame) -> pl.DataFrame:
+    """The runs wider than the widest steady point (every run without one) that ran but
+    whose mean drifts, by W: the verdicts name them as a reason (:func:`drift_reasons`)."""
+    if not points.height or "drift_z" not in points.columns:
+        return points.clear()
+    st = _steady(values).filter(~pl.col("branch")) if values.height else values
+    widest = float(st["W"].max()) if st.height else 0.0  # type: ignore[arg-type]
+    return drifting(points).filter(pl.col("W") > widest).sort("W", "phi_bar", "seed")
+
+
+def drift_reasons(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
+    """A line per run of :func:`wider_drifts`, with its measure: the thirds test's |z| and
+    its slowest correlation time against the time it averaged."""
+    return [f"- W = {r['W']:g} (φ̄ = {r['phi_bar']:g}) ran to t = {r['t_end']:.0f} but drifts "
+            f"({r['drift_quantity']}: |z| = {r['drift_z']:.1f} by the thirds test; its "
+            f"slowest correlation time {r['tau_max']:.0f} against {r['T_avg']:.0f} averaged)."
+            for r in wider_drifts(points, values).iter_rows(named=True)]
+
+
 def verdicts(points: pl.DataFrame, values: pl.DataFrame,
              profiles: pl.DataFrame | None = None) -> pl.DataFrame:
     """000's claims (issue 36, item 4), each "holds", "does not hold" (the measured value more
@@ -877,16 +907,12 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     widest = float(st["W"].max()) if st.height else math.nan  # type: ignore[arg-type]
     scale_why = (f"the widest steady channel here is W = {widest:g}" if st.height
                  else "no steady point")
-    # a wider run that ran but whose mean drifts is named, with its measure
-    drifts = drifting(points).filter(pl.col("W") > (widest if st.height else 0.0)) \
-        if points.height and "drift_z" in points.columns else points.clear()
+    # a wider run that ran but whose mean drifts is named (its measure: wider_drifts)
+    drifts = wider_drifts(points, values)
     if drifts.height:
         scale_why += "; " + ", ".join(
-            f"W = {r['W']:g} (φ̄ = {r['phi_bar']:g}) ran to t = {r['t_end']:.0f} but drifts "
-            f"({r['drift_quantity']}: "
-            f"|z| = {r['drift_z']:.1f} by the thirds test; its slowest correlation time "
-            f"{r['tau_max']:.0f} against {r['T_avg']:.0f} averaged)"
-            for r in drifts.sort("W").iter_rows(named=True))
+            f"W = {w:g} (φ̄ = {p:g}) drifts" for w, p in drifts.select("W", "phi_bar")
+            .iter_rows()) + " (below the table)"
     # the scaling exponents between the two widest widths >= 100, per phi_bar, pooled
     for raw, name, n0 in (("u_slip", "u_slip ∝ √W", 0.5), ("u_max", "u_max ∝ √W", 0.5),
                           ("delta_095", "δ0.95 ∝ W", 1.0)):
@@ -984,11 +1010,9 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         if points.height else points
     if flow.height:
         want = {0.59: "steady", 0.60: "steady", 0.61: "steady", 0.62: "fluctuating"}
-        # 000's states are those of v_cm's fluctuations: a run whose mean drifts keeps its
-        # v_cm state in vcm_state (a row from before that column: its state, unless drifting)
-        seen = [(r["W"], r["phi_bar"], r.get("vcm_state") or r["state"])
-                for r in flow.iter_rows(named=True) if round(r["phi_bar"], 2) in want
-                and (r.get("vcm_state") or r["state"] != FlowState.DRIFTING.value)]
+        seen = [(r["W"], r["phi_bar"], r["state_000"])
+                for r in with_state_000(flow).iter_rows(named=True)
+                if round(r["phi_bar"], 2) in want and r["state_000"] is not None]
         miss = [(w, p, st_) for w, p, st_ in seen if st_ != want[round(p, 2)]]
         add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
             "steady / fluctuating / jammed", f"{len(seen) - len(miss)} of {len(seen)} runs "
@@ -1017,7 +1041,8 @@ def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
             "value (its printed digits' interval), 'does not hold' beyond, 'cannot tell at "
             f"this scale' without a point at 000's widths (W >= {W_PAPER_MIN:g}; the scaling "
             f"claims two steady widths >= {W_SCALING_MIN:g}) or without an SE. "
-            + ", ".join(f"{k}: {n}" for k, n in count.items()) + ".", "", md_table(tab), ""]
+            + ", ".join(f"{k}: {n}" for k, n in count.items()) + ".", "", md_table(tab), "",
+            *([*drift_reasons(points, values), ""] if drift_reasons(points, values) else [])]
 
 
 #: the states of a run whose flow still speeds up or slows down (flow_state's trend test)
@@ -1042,13 +1067,12 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     :func:`point_values`)."""
     steady = _steady(values).filter(~pl.col("branch")) if values.height else values
     out = ["## Findings", ""]
-    flow = points.filter(pl.col("parent") == "")
-    if "vcm_state" in flow.columns:  # (a drifting run with its v_cm state, 000's)
-        flow = flow.with_columns(
-            pl.when((pl.col("state") == FlowState.DRIFTING.value)
-                    & pl.col("vcm_state").is_not_null())
-            .then(pl.format("{} (v_cm {})", "state", "vcm_state"))
-            .otherwise(pl.col("state")).alias("state"))
+    # (a drifting run with its v_cm state, 000's)
+    flow = with_state_000(points.filter(pl.col("parent") == "")).with_columns(
+        pl.when((pl.col("state") == FlowState.DRIFTING.value)
+                & pl.col("state_000").is_not_null())
+        .then(pl.format("{} (v_cm {})", "state", "state_000"))
+        .otherwise(pl.col("state")).alias("state"))
     for (w,), g in flow.sort("phi_bar", "seed").group_by(["W"], maintain_order=True):
         states = "; ".join(
             f"φ̄ {p:g}: " + ", ".join(f"{s}{f' x{n}' if n > 1 else ''}"
@@ -1149,7 +1173,11 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
                         f"--{plan.name} --out {out} --report {path}`; it resumes from what is "
                         "there.\n\n" + "\n".join(remaining(out, plan)))
         return path
+    # (a drifting run's steady part is not stationary: T^-1/2 is not what its SE should do)
     se = _read(out, "se_vs_time")
+    if se.height and raw.height:
+        se = se.join(drifting(raw).select(*POINT_BY, "seed"), on=[*POINT_BY, "seed"],
+                     how="anti")
     # the 10-block rule, applied to the dataset as the analysis now applies it
     points = refuse_few_blocks(raw) if raw.height else raw
     profiles = _of_steady(points, refuse_few_blocks(raw, _read(out, "profiles")))
