@@ -178,6 +178,43 @@ def test_an_unfinished_point_goes_on_from_its_committed_copy_when_its_work_dir_i
     assert not kept.exists() and (tmp_path / "points.parquet").exists()
 
 
+def test_a_point_says_where_it_stands_after_every_stint(tmp_path: Path, capsys):
+    run_point(Scripted(), Point("slow", arrest_at=3), Plan(), str(tmp_path / "work"))
+    lines = capsys.readouterr().out.splitlines()
+    assert [x.split(":")[0] for x in lines] == [f"  slow stint {i}" for i in (1, 2, 3, 4)]
+    assert lines[0].endswith(": flowing") and lines[-1].endswith(": arrested; done (arrested)")
+    # (its meta.json keeps the study's progress fields, for --status)
+    meta = json.loads((tmp_path / "work" / "slow" / "meta.json").read_text())
+    assert meta["progress"] == {"t_run": 4.0, "stints": 4}
+
+
+@dataclass(frozen=True)
+class Plans(Plan):
+    points: tuple[Point, ...] = ()
+    name: str = "toy"
+
+
+def test_the_status_lists_the_started_unfinished_points_with_their_progress(
+        tmp_path: Path, capsys):
+    from granflow.studies._campaign.command import print_status
+    from granflow.studies._campaign.engine import status
+
+    plan = Plans(points=(Point("done"), Point("going"), Point("moved"), Point("waiting")))
+    run_points(Scripted(), plan.points[:1], plan, tmp_path, workers=1, log=lambda *_: None)
+    run_point(Scripted(), plan.points[1], Plans(t_max=3.0), str(tmp_path / "work"))
+    run_point(Scripted(), plan.points[2], Plans(t_max=5.0), str(tmp_path / "work"))
+    shutil.rmtree(tmp_path / "work" / "moved")  # (its copy is all that is left)
+    tab = status(tmp_path, plan)
+    assert tab.select("key", "where", "stints", "state", "t_run").rows() == [
+        ("going", "work", 3, "flowing", 3.0), ("moved", "progress", 5, "flowing", 5.0)]
+    assert (tab["wall_seconds"] > 0).all() and (tab["cpu_seconds"] > 0).all()
+    capsys.readouterr()
+    print_status(tmp_path, plan)
+    out = capsys.readouterr().out
+    assert out.startswith(f"toy in {tmp_path}: 4 points, 1 finished, 2 started\n")
+    assert "going" in out and "moved" in out and "waiting" not in out
+
+
 class Branching(Scripted):
     """The point "child" starts from the final state of "parent"."""
 

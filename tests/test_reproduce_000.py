@@ -123,6 +123,15 @@ def test_the_command_line_writes_the_report(quick, capsys):
     assert (out / "cli.md").exists() and "report:" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         rp.main(["--quick", "--full"])  # one mode at a time
+    # --status: where the plan stands, nothing run or written
+    before = sorted(p.name for p in out.iterdir())
+    rp.main(["--quick", "--out", str(out), "--status"])
+    said = capsys.readouterr().out
+    from granflow.studies._campaign.engine import plan_points
+
+    n = len(plan_points(rp.quick_plan()))  # (its points and its k_n branch, all finished)
+    assert said.startswith(f"quick in {out}: {n} points, {n} finished, 0 started"), said
+    assert sorted(p.name for p in out.iterdir()) == before
 
 
 def test_every_finished_point_has_its_order_across_the_channel(quick):

@@ -492,6 +492,12 @@ class ChannelStudy(Study):
         return min(max(1, round(plan.stint / point.dt)),
                    max(1, round((t_max - scene.core.time) / point.dt)))
 
+    def describe(self, row: Mapping[str, Any]) -> str:
+        return (f"{row.get('state')}{'' if row.get('converged') else ' (not converged)'}, "
+                f"u_slip = {fmt(row, 'u_slip')}, u_max/u_slip = "
+                f"{fmt(row, 'u_max_over_u_slip')}, t = {fmt(row, 't_run', '.0f')}, prep "
+                f"{fmt(row, 'prep_seconds', '.1f')} s, {fmt(row, 'wall_seconds', '.0f')} s")
+
     def progress(self, scene: Any, prep_seconds: float) -> dict[str, Any]:
         return {"n": scene.prep_info.get("n"),
                 "phi_bar_achieved": scene.prep_info.get("phi_bar_achieved"),
@@ -536,13 +542,6 @@ def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
 # --------------------------------------------------------------------------------------------
 # the campaign
 # --------------------------------------------------------------------------------------------
-def _describe(row: dict[str, Any]) -> str:
-    return (f"{row.get('state')}{'' if row.get('converged') else ' (not converged)'}, "
-            f"u_slip = {fmt(row, 'u_slip')}, u_max/u_slip = {fmt(row, 'u_max_over_u_slip')}, "
-            f"t = {fmt(row, 't_run', '.0f')}, prep {fmt(row, 'prep_seconds', '.1f')} s, "
-            f"{fmt(row, 'wall_seconds', '.0f')} s")
-
-
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None, log: Any = print,
                  threads: int | None = None) -> pl.DataFrame:
@@ -550,7 +549,7 @@ def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = 
     parents are done, first), then the other branches (their parents are done by then), then
     its later points; each finished point is appended there as it completes."""
     kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "threads": threads,
-                          "describe": _describe, "log": log}
+                          "log": log}
     if (n := add_final_rows(STUDY, Point, plan, out)):
         log(f"{plan.name}: the order across the channel measured on {n} finished points' last "
             "states")

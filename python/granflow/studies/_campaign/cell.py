@@ -332,6 +332,10 @@ class CellStudy(Study):
     def context(self, scene: Any) -> dict[str, Any]:
         return {"shear_start_time": float(scene.shear_start_time or 0.0)}
 
+    def describe(self, row: Mapping[str, Any]) -> str:
+        return (f"{row.get('state')}, I = {fmt(row, 'I')}, phi = {fmt(row, 'phi', '.4f')}, "
+                f"{fmt(row, 'shear_steps', '.0f')} steps, {fmt(row, 'wall_seconds', '.0f')} s")
+
     def progress(self, scene: Any, prep_seconds: float) -> dict[str, Any]:
         return {"t_c": scene.t_c, "shear_steps": _shear_steps(scene),
                 "T_shear": float(scene.core.time - scene.shear_start_time)}
@@ -374,12 +378,6 @@ def _shear_steps(cell: Any) -> int:
 STUDY = CellStudy()
 
 
-def describe(row: dict[str, Any]) -> str:
-    """A finished point's progress line."""
-    return (f"{row.get('state')}, I = {fmt(row, 'I')}, phi = {fmt(row, 'phi', '.4f')}, "
-            f"{row['shear_steps']} steps, {row['wall_seconds']:.0f} s")
-
-
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None,
                  log: Callable[[str], Any] = print,
@@ -387,7 +385,7 @@ def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = 
     """Run the points of ``plan`` not yet in ``out/points.parquet``; each finished point is
     appended there as it completes (local process pool by default, or a Dask scheduler)."""
     return run_points(STUDY, plan.points, plan, out, workers=workers, scheduler=scheduler,
-                      threads=threads, describe=describe, log=log, name=plan.name)
+                      threads=threads, log=log, name=plan.name)
 
 
 def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:

@@ -14,7 +14,8 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         options: Mapping[str, tuple[str, str]] | None = None) -> None:
     """The command line of a reproduction campaign: ``--quick`` (default), ``--full`` or
     ``--paper`` (``plans``: name -> (plan factory, help)), ``--out``, ``--report``,
-    ``--workers`` / ``--threads`` / ``--scheduler``, ``--reanalyse``, ``--only-report``;
+    ``--workers`` / ``--threads`` / ``--scheduler``, ``--reanalyse``, ``--only-report``,
+    ``--status`` (:func:`print_status`);
     ``options`` (name -> (default, help)) are further string options, passed to
     ``write_report`` by keyword."""
     import argparse
@@ -34,6 +35,8 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
                     "shares the cores)")
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
     ap.add_argument("--only-report", action="store_true", help="no runs, the report only")
+    ap.add_argument("--status", action="store_true",
+                    help="no runs, no report: where each started, unfinished point stands")
     ap.add_argument("--select", default=None, metavar="REGEX",
                     help="run only the plan's points whose key matches (re.search), e.g. "
                     "'_I0.001_s1$'; the report still covers the whole dataset")
@@ -53,6 +56,9 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         except ParameterError as e:
             ap.error(str(e))
     out = Path(a.out or f"results/{stem}_{plan.name}")
+    if a.status:
+        print_status(out, plan)
+        return
     if a.reanalyse:
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
     if not a.only_report:
@@ -61,6 +67,24 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     path = write_report(out, Path(a.report) if a.report else out / "report.md", whole,
                         **{k: getattr(a, k) for k in options or {}})
     print(f"report: {path}")
+
+
+def print_status(out: Path, plan: Any) -> None:
+    """The ``--status`` table (:func:`.engine.status`): a line per started, unfinished point,
+    and the count of finished ones."""
+    import polars as pl
+
+    from .engine import done_keys, plan_points, status
+
+    tab = status(out, plan)
+    points = plan_points(plan)
+    done = done_keys(out, type(points[0])) & {p.key for p in points} if points else set()
+    print(f"{plan.name} in {out}: {len({p.key for p in points})} points, {len(done)} finished, "
+          f"{tab.height} started")
+    if tab.height:
+        with pl.Config(tbl_rows=-1, tbl_hide_dataframe_shape=True, tbl_hide_column_data_types=True,
+                       fmt_str_lengths=80, tbl_width_chars=200):
+            print(tab.with_columns(pl.col("t_run", "wall_seconds", "cpu_seconds").round(0)))
 
 
 def select(plan: Any, pattern: str) -> Any:

@@ -194,6 +194,11 @@ class Study:
         states of the earlier stints, oldest first."""
         raise NotImplementedError
 
+    def describe(self, row: Mapping[str, Any]) -> str:
+        """A point's progress line from its ``row`` (after a stint, with ``wall_seconds`` and
+        ``cpu_seconds`` so far, and when it is done): its state by default."""
+        return str(row.get("state"))
+
     def current(self, row: Mapping[str, Any]) -> bool:
         """Whether a finished ``row`` of the dataset counts as done: judged by the present
         stop rule. One that does not (written before the rule) is run again, and the new row
@@ -210,6 +215,13 @@ def error_state(exc: GranflowError) -> str:
     """The state of a point ended by ``exc``: "runaway" for the cell's runaway dilation,
     "failed" for any other error."""
     return "runaway" if isinstance(exc, DilationError) else "failed"
+
+
+def _plain(x: Any) -> Any:
+    """A numpy scalar in meta.json as the Python number it holds."""
+    if hasattr(x, "item"):
+        return x.item()
+    raise TypeError(f"not JSON: {type(x).__name__}")
 
 
 def _read_tables(d: Path) -> dict[str, pa.Table]:
@@ -259,7 +271,8 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
 
     def write_meta() -> None:
         meta.write_text(json.dumps({**info, "wall_seconds": wall(), "cpu_seconds": cpu(),
-                                    "history": history, "context": context}))
+                                    "history": history, "context": context},
+                                   default=_plain))
 
     error: GranflowError | None = None
     row: dict[str, Any] = {}
@@ -275,8 +288,13 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
             row.update(study.progress(scene, info["prep_seconds"]))
             done = study.stop(row, point, plan, history)
             history.append(str(row["state"]))
+            info["progress"] = study.progress(scene, info["prep_seconds"])
             write_meta()
             progress.keep(d, copy, study.kept_tables(point, plan, tables))
+            # (a point runs for hours: a line a stint, flushed, from whichever worker runs it)
+            print(f"  {point.key} stint {len(history)}: "
+                  f"{study.describe({**row, 'wall_seconds': wall(), 'cpu_seconds': cpu()})}"
+                  + (f"; done ({done})" if done is not None else ""), flush=True)
             if done is not None:
                 break
     except GranflowError as exc:
@@ -396,8 +414,8 @@ def _context(info: Mapping[str, Any], d: Path) -> dict[str, Any]:
 
 def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.PathLike[str], *,
                workers: int | None = None, scheduler: str | None = None,
-               threads: int | None = None, describe: Callable[[dict[str, Any]], str] = str,
-               log: Callable[[str], Any] = print, name: str = "campaign") -> pl.DataFrame:
+               threads: int | None = None, log: Callable[[str], Any] = print,
+               name: str = "campaign") -> pl.DataFrame:
     """Run (:func:`run_point`) the ``points`` not yet done in ``out/points.parquet`` (local
     process pool by default, or a Dask scheduler): those it lacks, and those whose row is not
     :func:`is_current` (the new row replaces the old, in every table); each finished row is
@@ -441,6 +459,46 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
         finished.add(key)
         for k in (key, *study.starts_from(point_of(cls, row))):
             tidy(k)
-        log(f"  {key}: {describe(row)}")
+        log(f"  {key}: {study.describe(row)}")
     f = outp / "points.parquet"
     return pl.read_parquet(f) if f.exists() else pl.DataFrame()
+
+
+def plan_points(plan: Any) -> list[Any]:
+    """Every point of ``plan``, in its order: the points of each of its tuples of points (a
+    cell plan's ``points``; reproduce_000's ``points``, ``branches`` and ``later``)."""
+    return [p for f in dataclasses.fields(plan)
+            if isinstance(v := getattr(plan, f.name), tuple) for p in v if hasattr(p, "key")]
+
+
+def status(out: str | os.PathLike[str], plan: Any) -> pl.DataFrame:
+    """Where each started, unfinished point of ``plan`` stands in the dataset ``out``: a row
+    per point with a work directory (``OUT/work/<key>``) or a committed copy
+    (``OUT/progress/<key>``), whichever has run more stints (``where``), with its stints, the
+    last stint's state, how far it ran (``t_run``, where its meta.json records the study's
+    progress fields) and its wall and CPU seconds so far. A point with a row in
+    ``points.parquet`` is left out."""
+    outp = Path(out)
+    points = plan_points(plan)
+    done = done_keys(outp, type(points[0])) if points else set()
+    rows = []
+    for key in dict.fromkeys(p.key for p in points):
+        if key in done:
+            continue
+        metas = [(where, json.loads(m.read_text()))
+                 for where, m in (("work", outp / "work" / key / "meta.json"),
+                                  ("progress", kept_dir(outp / "work", key) / "meta.json"))
+                 if m.exists()]
+        if not metas:
+            continue
+        where, m = max(metas, key=lambda wm: len(wm[1].get("history", [])))
+        hist = m.get("history", [])
+        rows.append({"key": key, "where": where, "stints": len(hist),
+                     "state": hist[-1] if hist else None,
+                     "t_run": m.get("progress", {}).get("t_run"),
+                     "wall_seconds": m.get("wall_seconds"),
+                     "cpu_seconds": m.get("cpu_seconds")})
+    return pl.DataFrame(rows, schema={"key": pl.String, "where": pl.String,
+                                      "stints": pl.Int64, "state": pl.String,
+                                      "t_run": pl.Float64, "wall_seconds": pl.Float64,
+                                      "cpu_seconds": pl.Float64})
