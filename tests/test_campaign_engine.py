@@ -211,7 +211,8 @@ def test_the_status_lists_the_started_unfinished_points_with_their_progress(
     capsys.readouterr()
     print_status(tmp_path, plan)
     out = capsys.readouterr().out
-    assert out.startswith(f"toy in {tmp_path}: 4 points, 1 finished, 2 started\n")
+    assert out.startswith(f"toy in {tmp_path}: 4 points, 1 with a row in points.parquet, "
+                          "2 started\n")
     assert "going" in out and "moved" in out and "waiting" not in out
 
 

@@ -130,7 +130,8 @@ def test_the_command_line_writes_the_report(quick, capsys):
     from granflow.studies._campaign.engine import plan_points
 
     n = len(plan_points(rp.quick_plan()))  # (its points and its k_n branch, all finished)
-    assert said.startswith(f"quick in {out}: {n} points, {n} finished, 0 started"), said
+    assert said.startswith(f"quick in {out}: {n} points, {n} with a row in points.parquet, "
+                           "0 started"), said
     assert sorted(p.name for p in out.iterdir()) == before
 
 

@@ -71,7 +71,7 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
 
 def print_status(out: Path, plan: Any) -> None:
     """The ``--status`` table (:func:`.engine.status`): a line per started, unfinished point,
-    and the count of finished ones."""
+    and the count of points with a row."""
     import polars as pl
 
     from .engine import done_keys, plan_points, status
@@ -79,8 +79,9 @@ def print_status(out: Path, plan: Any) -> None:
     tab = status(out, plan)
     points = plan_points(plan)
     done = done_keys(out, type(points[0])) & {p.key for p in points} if points else set()
-    print(f"{plan.name} in {out}: {len({p.key for p in points})} points, {len(done)} finished, "
-          f"{tab.height} started")
+    # (a row from before a study's present stop rule counts here, though a run goes on with it)
+    print(f"{plan.name} in {out}: {len({p.key for p in points})} points, {len(done)} with a "
+          f"row in points.parquet, {tab.height} started")
     if tab.height:
         with pl.Config(tbl_rows=-1, tbl_hide_dataframe_shape=True, tbl_hide_column_data_types=True,
                        fmt_str_lengths=80, tbl_width_chars=200):
@@ -98,14 +99,15 @@ def select(plan: Any, pattern: str) -> Any:
 
     from granflow.errors import ParameterError
 
+    from .engine import point_fields
+
     try:
         rx = re.compile(pattern)
     except re.error as e:
         raise ParameterError(f"invalid select = {pattern!r}: allowed a regular expression "
                              f"({e})") from None
-    kept = {f.name: tuple(p for p in v if rx.search(p.key))
-            for f in dataclasses.fields(plan)
-            if isinstance(v := getattr(plan, f.name), tuple) and v and hasattr(v[0], "key")}
+    kept = {name: tuple(p for p in v if rx.search(p.key))
+            for name, v in point_fields(plan).items()}
     if not any(kept.values()):
         raise ParameterError(f"invalid select = {pattern!r}: allowed a pattern matching at "
                              f"least one point key of the {plan.name} plan (e.g. "

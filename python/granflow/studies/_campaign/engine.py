@@ -285,10 +285,10 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
             scene.save_checkpoint(ck)
             write_meta()  # (a checkpoint is never without its meta, even before the row)
             row = study.row(point, plan, tables, context)
-            row.update(study.progress(scene, info["prep_seconds"]))
+            info["progress"] = study.progress(scene, info["prep_seconds"])
+            row.update(info["progress"])
             done = study.stop(row, point, plan, history)
             history.append(str(row["state"]))
-            info["progress"] = study.progress(scene, info["prep_seconds"])
             write_meta()
             progress.keep(d, copy, study.kept_tables(point, plan, tables))
             # (a point runs for hours: a line a stint, flushed, from whichever worker runs it)
@@ -464,11 +464,16 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
     return pl.read_parquet(f) if f.exists() else pl.DataFrame()
 
 
+def point_fields(plan: Any) -> dict[str, tuple[Any, ...]]:
+    """The fields of the dataclass ``plan`` that are tuples of points (points have a ``key``):
+    a cell plan's ``points``; reproduce_000's ``points``, ``branches`` and ``later``."""
+    return {f.name: v for f in dataclasses.fields(plan)
+            if isinstance(v := getattr(plan, f.name), tuple) and v and hasattr(v[0], "key")}
+
+
 def plan_points(plan: Any) -> list[Any]:
-    """Every point of ``plan``, in its order: the points of each of its tuples of points (a
-    cell plan's ``points``; reproduce_000's ``points``, ``branches`` and ``later``)."""
-    return [p for f in dataclasses.fields(plan)
-            if isinstance(v := getattr(plan, f.name), tuple) for p in v if hasattr(p, "key")]
+    """Every point of ``plan`` (:func:`point_fields`), in its order."""
+    return [p for v in point_fields(plan).values() for p in v]
 
 
 def status(out: str | os.PathLike[str], plan: Any) -> pl.DataFrame:
