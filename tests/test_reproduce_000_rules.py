@@ -569,6 +569,11 @@ def test_the_runs_left_say_where_the_cap_cannot_hold_the_rules_correlation_times
     text = "\n".join(tau_floor(deep, plan))
     assert "W = 20, B = 10: τ 7 (20 τ = 140, 1 run); W = 20, B = 40: τ 13" in text, text
     assert "At W = 100, B = 10 that is more" in text
+    # (a stiffness branch, named by its k_n where only k_n differs)
+    stiff = pts.with_columns(kn=pl.Series([1e5, 1e6, 1e5]))
+    text = "\n".join(tau_floor(stiff, plan))
+    assert "W = 20, k_n = 100000: τ 7 (20 τ = 140, 1 run); W = 20, k_n = 1e+06: τ 13" in text, \
+        text
 
 
 def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():

@@ -1034,6 +1034,7 @@ def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
     if not points.height:
         return []
     tab = verdicts(points, values, profiles if profiles.height else None)
+    drifts = drift_reasons(points, values)
     count = {v: int((tab["verdict"] == v).sum())
              for v in ("holds", "does not hold", "cannot tell at this scale")}
     return ["## 000's claims: verdicts", "",
@@ -1042,7 +1043,7 @@ def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
             f"this scale' without a point at 000's widths (W >= {W_PAPER_MIN:g}; the scaling "
             f"claims two steady widths >= {W_SCALING_MIN:g}) or without an SE. "
             + ", ".join(f"{k}: {n}" for k, n in count.items()) + ".", "", md_table(tab), "",
-            *([*drift_reasons(points, values), ""] if drift_reasons(points, values) else [])]
+            *([*drifts, ""] if drifts else [])]
 
 
 #: the states of a run whose flow still speeds up or slows down (flow_state's trend test)

@@ -184,21 +184,22 @@ def tau_floor(points: pl.DataFrame, plan: Any) -> list[str]:
         return []
     room = plan.t_max - (plan.t_dev or 0.0)
     # a depth or stiffness branch at a width is a line of its own, named where runs differ in it
-    by = ["W"] + [c for c, _ in _QUALIFIERS if c in t.columns and t[c].n_unique() > 1]
+    quals = [(c, label) for c, label in _QUALIFIERS if c in t.columns and t[c].n_unique() > 1]
     words, short = [], []
-    for key, g in t.group_by(by):
+    for key, g in t.sort("W", *(c for c, _ in quals)).group_by(
+            ["W", *(c for c, _ in quals)], maintain_order=True):
         name = f"W = {key[0]:g}" + "".join(
-            f", {label} = {v:g}" for (_, label), v in zip(_QUALIFIERS, key[1:], strict=False))
+            f", {label} = {v:g}" for (_, label), v in zip(quals, key[1:], strict=True))
         lo, hi = float(g["tau_max"].min()), float(g["tau_max"].max())  # type: ignore[arg-type]
         need = (plan.min_taus * lo, plan.min_taus * hi)
-        words.append((key, f"{name}: τ {span(lo, hi, '.0f')} ({plan.min_taus:g} τ = "
-                           f"{span(*need, '.0f')}, {g.height} run{'s' if g.height > 1 else ''})"))
+        words.append(f"{name}: τ {span(lo, hi, '.0f')} ({plan.min_taus:g} τ = "
+                     f"{span(*need, '.0f')}, {g.height} run{'s' if g.height > 1 else ''})")
         if need[1] > room:
             short.append(name.removeprefix("W = "))
     return [f"What the cap leaves the stop rule: it averages at most {room:g} time units "
             f"(t = {plan.t_dev or 0.0:g}-{plan.t_max:g}) and asks for {plan.min_taus:g} "
             "correlation times of the slowest quantity; the finished runs measure "
-            + "; ".join(x for _, x in sorted(words))
+            + "; ".join(words)
             + (f". At W = {'; '.join(short)} that is more than the cap allows: a run there ends "
                "at the cap without the rule's SE unless the cap is raised." if short
                else "."), ""]
