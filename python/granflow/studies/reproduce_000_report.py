@@ -207,6 +207,12 @@ def _steady(values: pl.DataFrame, kn: float | None = 1e5) -> pl.DataFrame:
     return d.sort(["W", "phi_bar"]) if d.height else d
 
 
+def _main_steady(values: pl.DataFrame) -> pl.DataFrame:
+    """The k_n = 1e5 points of ``values`` (:func:`_steady`) less the stiffness branches: what
+    the fig. 5 tables, the verdicts and the findings are made of."""
+    return _steady(values).filter(~pl.col("branch")) if values.height else values
+
+
 def _se_note(r: dict[str, Any]) -> str:
     """Where a point's SEs come from: its replicas and blocks, or NED."""
     nb = r.get("n_blocks")
@@ -873,7 +879,7 @@ def wider_drifts(points: pl.DataFrame, values: pl.DataFrame) -> pl.DataFrame:
     whose mean drifts, by W: the verdicts name them as a reason (:func:`drift_reasons`)."""
     if not points.height or "drift_z" not in points.columns:
         return points.clear()
-    st = _steady(values).filter(~pl.col("branch")) if values.height else values
+    st = _main_steady(values)
     widest = float(st["W"].max()) if st.height else 0.0  # type: ignore[arg-type]
     return drifting(points).filter(pl.col("W") > widest).sort("W", "phi_bar", "seed")
 
@@ -897,7 +903,7 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     With ``profiles`` (the steady k_n = 1e5 points' half profiles) also phi_ad from the
     divergence of the kinetic coefficients in the loose zone (:func:`phi_ad_fits`) at W >=
     W_PAPER_MIN; it holds only where the fit resolves 000's +- 0.002."""
-    st = _steady(values).filter(~pl.col("branch")) if values.height else values
+    st = _main_steady(values)
     rows: list[dict[str, Any]] = []
 
     def add(claim: str, paper: str, measured: str, verdict: str, why: str) -> None:
@@ -1066,7 +1072,7 @@ def unsettled_lines(flow: pl.DataFrame) -> list[str]:
 def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     """The answers to the paper's claims, in words, from the tables below (``values``:
     :func:`point_values`)."""
-    steady = _steady(values).filter(~pl.col("branch")) if values.height else values
+    steady = _main_steady(values)
     out = ["## Findings", ""]
     # (a drifting run with its v_cm state, 000's)
     flow = with_state_000(points.filter(pl.col("parent") == "")).with_columns(
@@ -1187,7 +1193,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     every_depth = point_values(points, audit_factors(audit)) if points.height \
         else pl.DataFrame()
     values = main_depth(every_depth)
-    steady = _steady(values).filter(~pl.col("branch")) if values.height else values
+    steady = _main_steady(values)
     means = mean_profiles(profiles)
     figdir = path.parent / f"{path.stem}_figures"
     lines = [f"# Reproducing 000: the channel across W and φ̄ ({plan.name} campaign)", "",

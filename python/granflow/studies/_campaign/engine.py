@@ -217,13 +217,6 @@ def error_state(exc: GranflowError) -> str:
     return "runaway" if isinstance(exc, DilationError) else "failed"
 
 
-def _plain(x: Any) -> Any:
-    """A numpy scalar in meta.json as the Python number it holds."""
-    if hasattr(x, "item"):
-        return x.item()
-    raise TypeError(f"not JSON: {type(x).__name__}")
-
-
 def _read_tables(d: Path) -> dict[str, pa.Table]:
     import pyarrow.parquet as pq
 
@@ -270,9 +263,10 @@ def run_point(study: Study, point: Any, plan: Any, work: str,
         return float(info.get("cpu_seconds", math.nan)) + time.process_time() - c0
 
     def write_meta() -> None:
-        meta.write_text(json.dumps({**info, "wall_seconds": wall(), "cpu_seconds": cpu(),
-                                    "history": history, "context": context},
-                                   default=_plain))
+        # (io._jsonable: a study's progress fields may hold numpy scalars)
+        meta.write_text(json.dumps(io._jsonable({**info, "wall_seconds": wall(),
+                                                 "cpu_seconds": cpu(), "history": history,
+                                                 "context": context})))
 
     error: GranflowError | None = None
     row: dict[str, Any] = {}
