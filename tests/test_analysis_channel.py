@@ -291,3 +291,48 @@ def test_flow_state_vocabulary_keeps_the_committed_strings():
     assert json.dumps({"state": s}) == '{"state": "fluctuating"}'
     assert pl.DataFrame([{"state": s}]).schema["state"] == pl.String  # rows: plain strings
     assert pl.DataFrame({"state": ["fluctuating"]}).filter(pl.col("state") == s).height == 1
+
+
+def _with_level(tab: pa.Table, level: np.ndarray, shape: np.ndarray | None = None) -> pa.Table:
+    """``tab`` with u_y of window w times ``level[w]`` (a mode of the whole flow's speed),
+    and its plug (xi > 1.5 DELTA) times ``shape[w]`` beside it (a change of the profile's
+    shape)."""
+    d = pl.from_arrow(tab)
+    w = d["window"].to_numpy()
+    f = level[w]
+    if shape is not None:
+        xi = np.minimum(d["x"].to_numpy(), W - d["x"].to_numpy())
+        f = f * np.where(xi > 1.5 * DELTA, shape[w], 1.0)
+    return d.with_columns(u_y=pl.col("u_y") * f).to_arrow()
+
+
+def test_the_shape_has_an_se_on_its_own_correlation_time_where_the_level_wanders():
+    # (the flow's speed wanders over the whole record: the run's blocks, chosen on the mean
+    # velocity, are too few for any SE; the ratio u_max/u_slip does not see a common factor)
+    nw = 400
+    level = 1 + 0.05 * np.sin(2 * np.pi * 1.5 * np.arange(nw) / nw)
+    # (the truth on the bins: the wall bin's velocity and the central one's, without noise)
+    exact = cp.profiles(synthetic_bins(nw=4, noise_u=0.0)[0], start_time=2000.0)
+    truth = ch.velocity_scaling(exact)["u_max_over_u_slip"].value
+    zs = []
+    for seed in range(10):
+        tab = _with_level(synthetic_bins(nw=nw, seed=seed)[0], level)
+        prof = cp.profiles(tab, start_time=2000.0)
+        assert prof.n_blocks < 10
+        assert np.isnan(ch.velocity_scaling(prof)["u_max_over_u_slip"].se)
+        own = ch.own_blocked(tab, 2000.0)["u_max_over_u_slip"]
+        assert own.n_blocks >= 10 and own.tau < 20.0  # (windows of 10: white noise, tau 5)
+        assert np.isfinite(own.estimate.se)
+        zs.append((own.estimate.value - truth) / own.estimate.se)
+    # honest SEs: z over independent runs has unit rms (10 runs: 0.55-1.45 at 95 %)
+    assert 0.55 < float(np.sqrt(np.mean(np.square(zs)))) < 1.45
+
+
+def test_a_drifting_shape_gets_no_se_on_its_own_correlation_time():
+    nw = 400
+    tab, _ = synthetic_bins(nw=nw, seed=3)
+    drift = _with_level(tab, np.ones(nw), shape=1 + 0.02 * np.arange(nw) / nw)
+    own = ch.own_blocked(drift, 2000.0)["u_max_over_u_slip"]
+    assert own.drift_z > 3.0 and np.isnan(own.estimate.se)
+    steady = ch.own_blocked(tab, 2000.0)["u_max_over_u_slip"]
+    assert steady.drift_z < 3.0 and np.isfinite(steady.estimate.se)

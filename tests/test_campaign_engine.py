@@ -431,3 +431,43 @@ def test_reanalyse_keeps_the_rows_it_does_not_recompute(tmp_path: Path):
     assert reanalyse(Snapshot(), Point, Plan(), tmp_path) == 0
     assert pl.read_parquet(tmp_path / "snapshots.parquet").sort("name").equals(before)
     assert pl.read_parquet(tmp_path / "samples.parquet").sort("name", "t").equals(samples)
+
+
+def _append_one(out: str, name: str) -> None:
+    from granflow.studies._campaign.engine import append_point
+
+    append_point(Path(out), Point, {"name": name, "state": "flowing"},
+                 {"samples": [{"name": name, "t": 1.0}]})
+
+
+def test_a_second_process_appends_only_once_the_first_releases_the_dataset(tmp_path: Path):
+    # (one process per point into one OUT is the documented way to run points side by side;
+    # an append reads the table and writes it whole, so the dataset is held meanwhile)
+    import multiprocessing as mp
+    import time
+
+    from granflow.studies._campaign.engine import dataset_lock
+
+    _append_one(str(tmp_path), "first")
+    ctx = mp.get_context("spawn")
+    with dataset_lock(tmp_path):
+        child = ctx.Process(target=_append_one, args=(str(tmp_path), "second"))
+        child.start()
+        time.sleep(3.0)  # (time for the child to start and reach the lock)
+        assert child.is_alive(), "the child wrote while the dataset was held"
+        assert pl.read_parquet(tmp_path / "points.parquet")["name"].to_list() == ["first"]
+    child.join(60)
+    assert child.exitcode == 0
+    for stem in ("points", "samples"):
+        assert pl.read_parquet(tmp_path / f"{stem}.parquet")["name"].to_list() == [
+            "first", "second"]
+
+
+def test_many_appends_from_two_processes_lose_no_row(tmp_path: Path):
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(2) as pool:
+        pool.starmap(_append_one, [(str(tmp_path), f"p{i}") for i in range(24)])
+    names = pl.read_parquet(tmp_path / "points.parquet")["name"].to_list()
+    assert sorted(names) == sorted(f"p{i}" for i in range(24))

@@ -18,7 +18,8 @@ from granflow.analysis import channel as ch
 from granflow.analysis import channel_profiles as cp
 from granflow.analysis.stats import MIN_SE_BLOCKS, jackknife_se
 from granflow.studies import reproduce_000 as rp
-from granflow.studies.reproduce_000_report import POINT_BY, refuse_few_blocks, write_report
+from granflow.studies.reproduce_000_report import write_report
+from granflow.studies.reproduce_000_report_values import POINT_BY, refuse_few_blocks
 
 W = 20.0
 #: window duration and sample interval of the synthetic tables (the campaign's)
@@ -261,7 +262,10 @@ def test_the_report_regenerates_from_a_tiny_dataset(rows, tmp_path):
     assert "not enough data (2 blocks)" in text
     # the drifting point is listed and left out
     assert "Drifting runs (left out of the tables and fits): W = 40" in text
-    assert "| 40 | 0.6 |" not in text.split("## Fig. 5")[1]
+    assert "| 40 | 0.6 |" not in text.split("## Fig. 5")[1].split("## The profile's shape")[0]
+    # but its shape, stationary while its level grows, counts on its own correlation time
+    shape = text.split("## The profile's shape")[1].split("## Figures")[0]
+    assert "| 40 | 0.6 | 1 | drifting |" in shape, shape
     # the coverage audit: 3 replicas give 3 pairs, 2 degrees of freedom
     cov = text.split("## Coverage audit")[1]
     assert "| u_slip | 1 | 3 | 2 |" in cov and "No pairs" not in cov
@@ -317,7 +321,7 @@ def _claims_values(ratio: float, exponent: float = 0.5) -> pl.DataFrame:
 
 
 def test_the_verdicts_on_000s_claims():
-    from granflow.studies.reproduce_000_report import drift_reasons, verdicts
+    from granflow.studies.reproduce_000_report_claims import drift_reasons, verdicts
 
     values = _claims_values(1.385)
     points = values.select("W", "phi_bar").with_columns(parent=pl.lit(""),
@@ -365,7 +369,7 @@ def test_the_verdicts_on_000s_claims():
 
 
 def test_phi_ad_holds_only_at_000s_widths_and_where_the_fit_resolves_its_002():
-    from granflow.studies.reproduce_000_report import verdicts
+    from granflow.studies.reproduce_000_report_claims import verdicts
 
     values = _claims_values(1.385)
     points = values.select("W", "phi_bar").with_columns(parent=pl.lit(""),
@@ -401,7 +405,8 @@ def test_the_report_of_a_campaign_not_yet_begun(tmp_path):
 
 
 def test_the_depth_check_is_its_own_table_and_stays_out_of_the_width_analyses():
-    from granflow.studies.reproduce_000_report import depth_table, main_depth
+    from granflow.studies.reproduce_000_report import depth_table
+    from granflow.studies.reproduce_000_report_values import main_depth
 
     values = _claims_values(1.385).with_columns(replicas=pl.lit(3))
     deep = values.filter((pl.col("W") == 60.0) & (pl.col("phi_bar") == 0.60))
@@ -577,7 +582,6 @@ def test_the_runs_left_say_where_the_cap_cannot_hold_the_rules_correlation_times
 
 
 def test_the_plug_order_section_tells_an_amorphous_plug_from_a_crystal():
-    from granflow.studies.reproduce_000_report import POINT_BY
     from granflow.studies.reproduce_000_report_order import order_lines, run_order
 
     run = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0}
@@ -660,7 +664,6 @@ def test_the_creep_of_a_steady_part_is_its_relative_trend_per_1000_time_units():
 
 
 def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points():
-    from granflow.studies.reproduce_000_report import POINT_BY
     from granflow.studies.reproduce_000_report_creep import creep_lines, creep_table
 
     base = {"W": 20.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "",
@@ -688,12 +691,8 @@ def test_the_report_pools_the_creep_over_replicas_and_names_the_creeping_points(
 
 
 def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
-    from granflow.studies.reproduce_000_report import (
-        _se_note,
-        audit_factors,
-        coverage_table,
-        point_values,
-    )
+    from granflow.studies.reproduce_000_report import _se_note, coverage_table
+    from granflow.studies.reproduce_000_report_values import audit_factors, point_values
 
     def run(W: float, seed: int, u: float, ratio: float) -> dict[str, Any]:
         return {"W": W, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "seed": seed,
@@ -792,7 +791,8 @@ def test_a_committed_copy_keeps_what_the_rows_read_and_a_run_goes_on_from_it(tmp
 def test_the_findings_give_a_drifting_runs_vcm_state():
     from pathlib import Path
 
-    from granflow.studies.reproduce_000_report import findings, point_values
+    from granflow.studies.reproduce_000_report import findings
+    from granflow.studies.reproduce_000_report_values import point_values
 
     # the widths campaign's W = 100 run: drifting, its v_cm steady
     d = Path(__file__).resolve().parents[1] / "docs" / "data" / "reproduce_000_widths"
@@ -804,3 +804,48 @@ def test_the_findings_give_a_drifting_runs_vcm_state():
     # (rows from before vcm_state: their state as it is)
     text = "\n".join(findings(points.drop("vcm_state"), point_values(points)))
     assert "- W = 100: φ̄ 0.6: drifting (000" in text
+
+
+def test_the_ratio_is_judged_on_its_own_correlation_time_where_the_level_leaves_no_se():
+    from granflow.studies.reproduce_000_report_claims import verdicts
+    from granflow.studies.reproduce_000_report_shape import own_values, shape_lines
+
+    claim = "u_max/u_slip = 1.37-1.40 for every W, φ̄"
+    values = _claims_values(1.385).filter(pl.col("W") == 60.0)
+    # (the W = 60 points' level has a slow mode: no SE of anything from their blocks)
+    blind = values.with_columns(u_max_over_u_slip_se=pl.lit(float("nan")))
+    base = {"W": 60.0, "phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "",
+            "tau_max": 250.0, "u_max_over_u_slip_own_tau": 1.5, "u_max_over_u_slip_own_blocks": 32,
+            "delta_095_own": 5.5, "delta_095_own_se": 0.02, "delta_095_own_tau": 2.3,
+            "delta_095_own_blocks": 32}
+    runs = pl.DataFrame([
+        {**base, "seed": 1, "state": "drifting", "vcm_state": "steady",
+         "u_max_over_u_slip_own": 1.3640, "u_max_over_u_slip_own_se": 0.0006},
+        {**base, "seed": 2, "state": "steady", "vcm_state": "steady",
+         "u_max_over_u_slip_own": 1.3630, "u_max_over_u_slip_own_se": 0.0006},
+        # (an arrested run does not count, whatever its shape)
+        {**base, "seed": 3, "state": "arrested", "vcm_state": "arrested",
+         "u_max_over_u_slip_own": 1.20, "u_max_over_u_slip_own_se": 0.0006}])
+    tab = verdicts(runs, blind).filter(pl.col("claim (000)") == claim)
+    assert tab["verdict"][0] == "does not hold", tab
+    assert tab["measured here"][0] == "W = 60: 1.3635 ± 0.0009 (own τ, 2 runs)", tab
+    # without runs that carry it, the width cannot be told (and is still named)
+    tab = verdicts(runs.drop(c for c in runs.columns if "_own" in c), blind)
+    tab = tab.filter(pl.col("claim (000)") == claim)
+    assert tab["verdict"][0] == "cannot tell at this scale" and "W = 60" in tab["why"][0]
+    # where the points' own SEs exist they are used, not the shape's
+    tab = verdicts(runs, values).filter(pl.col("claim (000)") == claim)
+    assert tab["verdict"][0] == "holds" and "own τ" not in tab["measured here"][0], tab
+    # the section: the point's mean over its two flowing runs, their pair z
+    ov = own_values(runs, POINT_BY)
+    assert ov["replicas"].to_list() == [2]
+    text = "\n".join(shape_lines(runs, POINT_BY))
+    assert "1.3635 ± 0.0009" in text and "u_max/u_slip z = +1.2" in text, text
+
+
+def test_a_row_carries_the_shape_on_its_own_correlation_time(rows):
+    for r in rows.values():
+        if r["state"] in ("steady", "fluctuating", "drifting"):
+            assert r["u_max_over_u_slip_own_blocks"] >= 2
+            assert math.isfinite(r["u_max_over_u_slip_own"])
+            assert abs(r["u_max_over_u_slip_own"] - r["u_max_over_u_slip"]) < 0.01

@@ -38,8 +38,10 @@ from .channel_profiles import (
 from .estimate import Estimate
 from .stats import (
     DRIFT_Z,
+    MIN_SE_BLOCKS,
     Stationarity,
     blocking_many,
+    choose_blocks,
     jackknife_se,
     mean_se,
     ratio_se,
@@ -577,6 +579,80 @@ def steady_check(prof: ChannelProfiles, *, z_max: float = DRIFT_Z) -> SteadyChec
         tau = {k: float(t) for k, t in zip(ser, res.tau, strict=True)}
     tmax = max(tau.values()) if all(math.isfinite(t) for t in tau.values()) else math.nan
     return SteadyCheck(st, tau, tmax)
+
+
+#: the shape of the velocity profile (§3.1): the profile over itself. The flow's level (the
+#: plug's speed and the mean velocity) has a slow mode of its own (it relaxes against the
+#: shear zones' drag over hundreds of time units at W >= 60: benchmarks/NOTES.md), which
+#: sets the run's jackknife blocks (:func:`profiles`: on the mean velocity) and leaves a
+#: capped run too few of them for any SE; the shape moves with the level far less, so it
+#: gets an SE on blocks of its own correlation time (:func:`own_blocked`)
+SHAPE_QUANTITIES = ("u_max_over_u_slip", "delta_095")
+
+
+def _shape(xi: FloatArray, q: Mapping[str, FloatArray]) -> FloatArray:
+    """SHAPE_QUANTITIES of the derived half profile ``q`` (as :func:`velocity_scaling`)."""
+    return np.array([_u_max(q) / _u_slip(q), delta_095_profile(xi, q)])
+
+
+@dataclass(frozen=True)
+class OwnBlocked:
+    """A quantity's value and jackknife SE over blocks of its own correlation time
+    (:func:`own_blocked`).
+
+    Attributes
+    ----------
+    estimate
+        The value (the steady part's profile, less the windows a whole number of blocks
+        leaves out) and its SE: NaN unless ``n_blocks >= MIN_SE_BLOCKS``, the quantity's
+        blocking reached its plateau (``tau`` is a measurement, not a lower bound) and its
+        own thirds test passes (``drift_z <= DRIFT_Z``).
+    tau
+        Its integrated correlation time (blocking of its window series), in time units.
+    n_blocks
+        Blocks of at least its statistical inefficiency the steady part holds (at most 32).
+    drift_z
+        |z| of its own thirds test (NaN: too short to test).
+    """
+
+    estimate: Estimate
+    tau: float
+    n_blocks: int
+    drift_z: float
+
+
+@quiet
+def own_blocked(bins: TableLike, start_time: float, *,
+                max_blocks: int = 32) -> dict[str, OwnBlocked]:
+    """SHAPE_QUANTITIES of the steady part of ``bins`` (windows from ``start_time``), each on
+    jackknife blocks as long as its own statistical inefficiency (:class:`OwnBlocked`), not
+    the mean velocity's as :func:`profiles` chooses them for every other quantity. Longer
+    blocks than a quantity needs are valid too (fewer of them), so this matters only where
+    the run's blocks are too few for an SE."""
+    base = profiles(bins, start_time=start_time)
+    ser = base.window_series(lambda m: _shape(base.xi, base.derived(m)))
+    names = SHAPE_QUANTITIES
+    if ser.ndim != 2 or ser.shape[0] < 2:
+        return {k: OwnBlocked(Estimate(math.nan, math.nan), math.nan, 0, math.nan)
+                for k in names}
+    res = blocking_many(ser, dt=base.window_dt)
+    st = stationarity({k: ser[:, j] for j, k in enumerate(names)})
+    out: dict[str, OwnBlocked] = {}
+    by_nb: dict[int, ChannelProfiles] = {}
+    for j, k in enumerate(names):
+        _, nb = choose_blocks(ser.shape[0], float(res.g[j]), max_blocks)
+        nb = max(2, nb)
+        if nb not in by_nb:
+            by_nb[nb] = profiles(bins, start_time=start_time, n_blocks=nb)
+        p = by_nb[nb]
+        xi = p.xi
+        val, se = p.estimate(lambda q, xi=xi: _shape(xi, q))  # type: ignore[misc]
+        z = abs(st.z[k]) if st.tested else math.nan
+        ok = (nb >= MIN_SE_BLOCKS and bool(res.converged[j]) and math.isfinite(z)
+              and z <= DRIFT_Z)
+        out[k] = OwnBlocked(Estimate(float(val[j]), float(se[j]) if ok else math.nan),
+                            float(res.tau[j]), int(nb), z)
+    return out
 
 
 @quiet

@@ -346,6 +346,12 @@ def point_row(point: Point, plan: Plan, bins: pa.Table, series: pa.Table,
     row.update(drift_z=chk.stationarity.max_abs_z, drift_quantity=chk.stationarity.worst,
                drift_tested=chk.stationarity.tested, tau_max=chk.tau_max)
     row.update(creep_row(series, prof.t_start))
+    # (the profile's shape on blocks of its own correlation time: where the level's slow mode
+    # leaves the run too few blocks, these still have an SE; ach.own_blocked)
+    for k, ob in ach.own_blocked(bins, t_dev if t_dev else prof.t_start).items():
+        row[f"{k}_own"], row[f"{k}_own_se"] = ob.estimate.value, ob.estimate.se
+        row[f"{k}_own_tau"], row[f"{k}_own_blocks"] = ob.tau, ob.n_blocks
+        row[f"{k}_own_z"] = ob.drift_z
     if chk.drifting:
         row["state"] = FlowState.DRIFTING.value
     row["converged"] = converged(row, plan, point)

@@ -1,8 +1,9 @@
 """The report of the 000 campaign (:mod:`granflow.studies.reproduce_000`): the fig. 5 numbers
 against W and phi_bar beside the paper's statements, figures 4-10, the stiffness test per
 zone, error against run time, the coverage audit, the cost of each piece and the paper-scale
-recipe (sections in their own modules: reproduce_000_report_cost, _creep, _order; the
-figures drawn by reproduce_000_figures).
+recipe (the dataset's rules and point values in reproduce_000_report_values, the verdicts
+in _claims, further sections in _cost, _creep, _order and _shape; the figures drawn by
+reproduce_000_figures).
 
 Error rules: a point's value is the mean of its steady, stationary replicas with the
 larger of the within-run and between-replica SEs (:func:`granflow.analysis.replicas.replica_mean`,
@@ -12,19 +13,18 @@ drifting points are listed and left out of the tables and fits."""
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import polars as pl
 
-from granflow.analysis.channel import L_C_PAPER, fit_phi_ad
-from granflow.analysis.compare import AGREE_SIGMA, agrees, difference_z, interval_z
+from granflow.analysis.channel import L_C_PAPER
+from granflow.analysis.compare import difference_z, interval_z
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.replicas import mean_profiles as replica_profiles
 from granflow.analysis.replicas import replica_mean
-from granflow.analysis.rheology import pool_realizations
 from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
@@ -34,127 +34,37 @@ from ._campaign import (
     pm,
 )
 from .reproduce_000_figures import (
-    KINETIC,
     plot_fig4,
     plot_fig5,
     plot_fig7,
     plot_fig13,
     plot_profiles,
 )
+from .reproduce_000_report_claims import PHI_AD_PAPER, kinetic_fits, verdict_lines
 from .reproduce_000_report_cost import cost_section, remaining
 from .reproduce_000_report_creep import creep_lines
 from .reproduce_000_report_order import order_lines
+from .reproduce_000_report_shape import shape_lines
+from .reproduce_000_report_values import (
+    AUDITED,
+    NED,
+    PHI_PLUG_PAPER,
+    PHI_PLUG_PRINTED,
+    POINT_BY,
+    RATIO_PAPER,
+    REPORTED,
+    audit_factors,
+    drifting,
+    main_depth,
+    main_steady,
+    point_values,
+    pooled,
+    refuse_few_blocks,
+    with_state_000,
+)
 
-#: 000 §3.1: u_max/u_slip "varying by about 2 % in a very small range 1.37-1.40"
-RATIO_PAPER = (1.37, 1.40)
-#: 000 §3.2: phi in the plug "~0.63", printed with two decimals: 0.625-0.635
-PHI_PLUG_PAPER = 0.63
-PHI_PLUG_PRINTED = (0.625, 0.635)
-#: what the report writes where a quantity has no SE: its steady part gave fewer than
-#: MIN_SE_BLOCKS jackknife blocks
-NED = "not enough data"
-#: the quantities whose SE rests on where the plug ends (the plug edge needs the SE of du/dx:
-#: without it the analysis leaves the plug undetermined, granflow.analysis.channel.zones)
-PLUG_QUANTITIES = ("xi_plug", "phi_plug", "l_c")
 #: a difference is significant beyond this many combined SEs; consistent within AGREE
 SIGNIFICANT, AGREE = 3.0, 2.0
-
-
-#: the reported quantities (columns of points.parquet, each with its ``_se``): the value of a
-#: point over its replicas and the coverage audit
-REPORTED = ("u_slip", "u_max", "u_max_over_u_slip", "delta_095", "mean_velocity_ratio",
-            "wall_friction", "sigma_xx_mean")
-#: audited across replicas beside REPORTED (the plug's packing, set by each run's preparation)
-AUDITED = ("phi_plug",)
-#: a point's fields less the seed (and the parent key, which names its parent's seed): the
-#: replicas of a point share them
-POINT_BY = ("W", "phi_bar", "kn", "B", "H")
-
-def refuse_few_blocks(points: pl.DataFrame, table: pl.DataFrame | None = None) -> pl.DataFrame:
-    """``table`` (default ``points``) with every ``*_se`` of a run whose steady part gave fewer
-    than MIN_SE_BLOCKS jackknife blocks set to NaN, and (points) its plug quantities too:
-    the rule the analysis now applies (granflow.analysis.stats.jackknife_se), applied to a
-    dataset written before it. The runs' block counts are the ``n_blocks`` column of
-    points.parquet (the blocks behind every SE of the run: its profiles, zone means and
-    section 3 numbers come from the one jackknife); ``table``'s rows are matched to their run
-    by the point's fields."""
-    key = [*POINT_BY, "seed"]
-    few = points.filter(pl.col("n_blocks").fill_null(0) < MIN_SE_BLOCKS).select(key)
-    d = points if table is None else table
-    if not d.height or not few.height:
-        return d
-    d = d.join(few.with_columns(pl.lit(True).alias("_few")), on=key, how="left")
-    bad = pl.col("_few").fill_null(False)
-    cols = [c for c in d.columns if c.endswith("_se")]
-    if table is None:
-        cols += [c for c in PLUG_QUANTITIES if c in d.columns]
-    return d.with_columns(*(pl.when(bad).then(float("nan")).otherwise(pl.col(c).cast(
-        pl.Float64)).alias(c) for c in cols)).drop("_few")
-
-
-def drifting(points: pl.DataFrame) -> pl.DataFrame:
-    """The runs whose steady part drifts (state "drifting"): left out of every table and fit."""
-    return points.filter(pl.col("state") == FlowState.DRIFTING.value)
-
-
-def with_state_000(points: pl.DataFrame) -> pl.DataFrame:
-    """``points`` with ``state_000``: a run's state as 000 classifies it, from v_cm's
-    fluctuations. A drifting mean overrides ``state``, so a drifting run's v_cm state is in
-    ``vcm_state``; a drifting row from before that column has none (null: not judged)."""
-    own = (pl.when(pl.col("state") != FlowState.DRIFTING.value).then(pl.col("state"))
-           .otherwise(None))
-    vcm = pl.col("vcm_state") if "vcm_state" in points.columns else pl.lit(None, pl.String)
-    return points.with_columns(state_000=pl.coalesce(vcm, own))
-
-
-def audit_factors(tab: pl.DataFrame) -> dict[str, float]:
-    """Per audited quantity whose run SEs the coverage audit ``tab`` (:func:`coverage_table`)
-    finds too small (the 95 % interval of rms z above 1), that rms z: the factor by which a
-    run's SE falls short of the spread between its replicas."""
-    return {r["observable"]: float(r["rms_z"]) for r in tab.iter_rows(named=True)
-            if r["pairs"] > 0 and r["rms_z_lo"] > 1}
-
-
-def point_values(points: pl.DataFrame,
-                 factors: Mapping[str, float] | None = None) -> pl.DataFrame:
-    """One row per point (POINT_BY; ``branch``: a stiffness branch) from its steady replicas:
-    every ``X`` with ``X_se`` as their mean with ``X_se``, ``X_se_within`` and
-    ``X_se_between`` (:func:`granflow.analysis.replicas.replica_mean`; NaN where a replica has
-    no SE), ``replicas``, ``n_blocks`` the fewest blocks of a replica, and the zone boundaries
-    without an SE (xi_plug, xi_wall) as the replicas' mean.
-
-    ``factors`` (:func:`audit_factors`): a point with one replica has no between-replica SE
-    to fall back on, so its ``X_se`` is its run SE times ``factors[X]`` (``audit_scaled``:
-    True); ``X_se_within`` stays the run's own. That carries the audit of the points with
-    replicas over to it: an assumption (a run's SE falling short by the same factor at
-    another width), stated where the report uses it."""
-    d = steady_rows(points)
-    if not d.height:
-        return pl.DataFrame()
-    obs = [c for c in d.columns if f"{c}_se" in d.columns and c not in POINT_BY]
-    rm = replica_mean(d.with_columns(*(pl.col(c).cast(pl.Float64) for c in
-                                       (*obs, *(f"{o}_se" for o in obs)))), POINT_BY, obs)
-    scale = {o: f for o, f in (factors or {}).items() if o in obs}
-    one = pl.col("replicas") == 1
-    rm = rm.with_columns(*(pl.when(one).then(pl.col(f"{o}_se") * f).otherwise(
-        pl.col(f"{o}_se")).alias(f"{o}_se") for o, f in scale.items()),
-        # flagged only where a scaled SE exists (a run too short for blocks has none to scale)
-        (one & pl.any_horizontal(pl.lit(False), *(pl.col(f"{o}_se").is_finite().fill_null(False)
-                                                  for o in scale))).alias("audit_scaled"))
-    extra = d.group_by(list(POINT_BY)).agg(
-        pl.col("n_blocks").min(), pl.col("xi_plug").mean(), pl.col("xi_wall").mean(),
-        pl.col("l_c_at_bound").any(), (pl.col("parent").str.len_chars() > 0).any().alias(
-            "branch"))
-    return rm.join(extra, on=list(POINT_BY), how="left").sort(["W", "phi_bar", "kn"])
-
-
-def main_depth(values: pl.DataFrame) -> pl.DataFrame:
-    """The points at the campaign's main depth (the most common B): the depth check's other
-    depths (:func:`depth_table`) stay out of the width tables, fits and verdicts."""
-    if not values.height:
-        return values
-    b = values["B"].mode().sort()[0]
-    return values.filter(pl.col("B") == b)
 
 
 #: the quantities of the depth check
@@ -197,20 +107,6 @@ def _depth_section(values: pl.DataFrame) -> list[str]:
             "each quantity with its SE and its change from the main depth in combined SEs "
             "(blank at the main depth).", "",
             md_table(tab, {c: "+.1f" for c in tab.columns if c.endswith("(SEs)")}), ""]
-
-
-def _steady(values: pl.DataFrame, kn: float | None = 1e5) -> pl.DataFrame:
-    """The points of :func:`point_values` at ``kn`` (None: every k_n)."""
-    d = values
-    if kn is not None and d.height:
-        d = d.filter((pl.col("kn") / kn - 1).abs() < 1e-9)
-    return d.sort(["W", "phi_bar"]) if d.height else d
-
-
-def _main_steady(values: pl.DataFrame) -> pl.DataFrame:
-    """The k_n = 1e5 points of ``values`` (:func:`_steady`) less the stiffness branches: what
-    the fig. 5 tables, the verdicts and the findings are made of."""
-    return _steady(values).filter(~pl.col("branch")) if values.height else values
 
 
 def _se_note(r: dict[str, Any]) -> str:
@@ -273,7 +169,7 @@ def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
     rows = []
     for (w,), g in steady.sort("W").group_by(["W"], maintain_order=True):
         if g["u_max_over_u_slip_se"].is_finite().all():
-            m, e = _pooled(g, "u_max_over_u_slip")
+            m, e = pooled(g, "u_max_over_u_slip")
         else:
             m, e = float(g["u_max_over_u_slip"].mean()), math.nan  # type: ignore[arg-type]
         gap = max(RATIO_PAPER[0] - m, m - RATIO_PAPER[1], 0.0)
@@ -373,24 +269,12 @@ def zone_table(steady: pl.DataFrame) -> pl.DataFrame:
     return pl.DataFrame(rows)
 
 
-#: 000 §3.2 (fig. 13): the divergence fits give phi_ad = 0.59 +- 0.002
-PHI_AD_PAPER = (0.59, 0.002)
-
-
-def _kinetic_fits(profiles: pl.DataFrame) -> list[tuple[str, dict[str, float]]]:
-    """Each kinetic coefficient's label and fit_phi_ad over the loose-zone bins of the
-    unbranched points in ``profiles``."""
-    loose = profiles.filter(pl.col("zone") == "loose", pl.col("parent") == "")
-    return [(name, fit_phi_ad(loose["phi"].to_numpy(), loose[col].to_numpy(),
-                              loose[f"{col}_se"].to_numpy())) for col, name in KINETIC]
-
-
 def phi_ad_fits(profiles: pl.DataFrame) -> pl.DataFrame:
     """Fit A/(phi_ad - phi) (granflow.analysis.channel.fit_phi_ad) to each kinetic coefficient
     over the loose-zone bins of every steady k_n = 1e5 point (pass only those), pooled
     (fig. 13); the fit needs each bin's SE (fewer than three bins with one: NaN)."""
     rows = []
-    for name, f in _kinetic_fits(profiles):
+    for name, f in kinetic_fits(profiles):
         rows.append({"coefficient": name, "bins with an SE": f["n"],
                      "φ_ad": pm(f["phi_ad"], f["phi_ad_se"], 4) if math.isfinite(f["phi_ad"])
                      else NED, "χ²/dof": f["chi2_per_dof"],
@@ -838,220 +722,6 @@ def _coverage_section(points: pl.DataFrame, out: Path, tab: pl.DataFrame) -> lis
     return lines
 
 
-#: 000's scale: its claims are made for W = 60-150 (the scaling claims for W >= 100)
-W_PAPER_MIN, W_SCALING_MIN = 60.0, 100.0
-#: 000 §3.2: l_c = 11.5 d (printed: 11.45-11.55); Omega/omega -> 1/2 in the shear zones
-L_C_PRINTED = (L_C_PAPER - 0.05, L_C_PAPER + 0.05)
-OMEGA_RATIO_PAPER = (0.5, 0.5)
-def _judge(value: float, se: float, lo: float, hi: float,
-           resolve: tuple[float, float] | None = None) -> tuple[str, str]:
-    """(verdict, how far) of a value with its SE against 000's interval [lo, hi].
-    ``resolve`` = (the measurement's own SE, 000's quoted +-): an agreement whose own SE
-    exceeds 000's precision cannot confirm it ("cannot tell"); a disagreement still counts."""
-    z = interval_z(value, se, lo, hi)
-    if not math.isfinite(z):
-        return "cannot tell at this scale", NED
-    far = f"{z:.1f} SEs from {lo:g}" + (f"-{hi:g}" if hi != lo else "")
-    if not agrees(z):
-        return "does not hold", far
-    if resolve is not None and resolve[0] > resolve[1]:
-        return ("cannot tell at this scale",
-                far + f", but the fit's own SE {resolve[0]:.4f} exceeds 000's ± {resolve[1]:g}")
-    return "holds", far
-
-
-def _pooled(g: pl.DataFrame, col: str) -> tuple[float, float]:
-    """The inverse-variance mean of ``col`` over the rows of ``g`` that have an SE, and its SE
-    (:func:`granflow.analysis.rheology.pool_realizations`); the plain mean and NaN where no
-    row has one."""
-    se = f"{col}_se"
-    ok = g.select(col, se).filter(pl.col(col).is_finite() & pl.col(se).is_finite()
-                                  & (pl.col(se) > 0))
-    if not ok.height:
-        v = g[col].to_numpy()
-        return (float(np.nanmean(v)) if np.isfinite(v).any() else math.nan), math.nan
-    r = pool_realizations(ok.with_columns(_all=pl.lit(0)), ["_all"]).row(0, named=True)
-    return float(r[col]), float(r[se])
-
-
-def wider_drifts(points: pl.DataFrame, values: pl.DataFrame) -> pl.DataFrame:
-    """The runs wider than the widest steady point (every run without one) that ran but
-    whose mean drifts, by W: the verdicts name them as a reason (:func:`drift_reasons`)."""
-    if not points.height or "drift_z" not in points.columns:
-        return points.clear()
-    st = _main_steady(values)
-    widest = float(st["W"].max()) if st.height else 0.0  # type: ignore[arg-type]
-    return drifting(points).filter(pl.col("W") > widest).sort("W", "phi_bar", "seed")
-
-
-def drift_reasons(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
-    """A line per run of :func:`wider_drifts`, with its measure: the thirds test's |z| and
-    its slowest correlation time against the time it averaged."""
-    return [f"- W = {r['W']:g} (φ̄ = {r['phi_bar']:g}) ran to t = {r['t_end']:.0f} but drifts "
-            f"({r['drift_quantity']}: |z| = {r['drift_z']:.1f} by the thirds test; its "
-            f"slowest correlation time {r['tau_max']:.0f} against {r['T_avg']:.0f} averaged)."
-            for r in wider_drifts(points, values).iter_rows(named=True)]
-
-
-def verdicts(points: pl.DataFrame, values: pl.DataFrame,
-             profiles: pl.DataFrame | None = None) -> pl.DataFrame:
-    """000's claims (issue 36, item 4), each "holds", "does not hold" (the measured value more
-    than AGREE_SIGMA SEs outside 000's interval) or "cannot tell at this scale" (no point at
-    000's widths, or no SE), with the measured value and the reason. At 000's widths only:
-    W >= W_SCALING_MIN for the scaling claims (the two widest steady widths there), W >=
-    W_PAPER_MIN for the others; k_n = 1e5 points (000: 1e6; fig. 10 finds phi and u the same).
-    With ``profiles`` (the steady k_n = 1e5 points' half profiles) also phi_ad from the
-    divergence of the kinetic coefficients in the loose zone (:func:`phi_ad_fits`) at W >=
-    W_PAPER_MIN; it holds only where the fit resolves 000's +- 0.002."""
-    st = _main_steady(values)
-    rows: list[dict[str, Any]] = []
-
-    def add(claim: str, paper: str, measured: str, verdict: str, why: str) -> None:
-        rows.append({"claim (000)": claim, "000": paper, "measured here": measured,
-                     "verdict": verdict, "why": why})
-
-    widest = float(st["W"].max()) if st.height else math.nan  # type: ignore[arg-type]
-    scale_why = (f"the widest steady channel here is W = {widest:g}" if st.height
-                 else "no steady point")
-    # a wider run that ran but whose mean drifts is named (its measure: wider_drifts)
-    drifts = wider_drifts(points, values)
-    if drifts.height:
-        scale_why += "; " + ", ".join(
-            f"W = {w:g} (φ̄ = {p:g}) drifts" for w, p in drifts.select("W", "phi_bar")
-            .iter_rows()) + " (below the table)"
-    # the scaling exponents between the two widest widths >= 100, per phi_bar, pooled
-    for raw, name, n0 in (("u_slip", "u_slip ∝ √W", 0.5), ("u_max", "u_max ∝ √W", 0.5),
-                          ("delta_095", "δ0.95 ∝ W", 1.0)):
-        ns, es = [], []
-        for (_,), g in st.filter(pl.col("W") >= W_SCALING_MIN).group_by(["phi_bar"]):
-            g = g.sort("W")
-            if g.height < 2:
-                continue
-            a, b = g.row(-2, named=True), g.row(-1, named=True)
-            span = math.log(b["W"] / a["W"])
-            ns.append(math.log(b[raw] / a[raw]) / span)
-            es.append(math.hypot(a[f"{raw}_se"] / a[raw], b[f"{raw}_se"] / b[raw]) / span)
-        if not ns:
-            add(name + " (W ≥ 100)", f"exponent {n0:g}", "-", "cannot tell at this scale",
-                scale_why + " (two steady widths >= 100 needed)")
-            continue
-        n, e = _pooled(pl.DataFrame({"n": ns, "n_se": es}), "n")
-        verdict, far = _judge(n, e, n0, n0)
-        add(name + " (W ≥ 100)", f"exponent {n0:g}", f"exponent {pm(n, e, 2)}", verdict,
-            far + f" ({len(ns)} φ̄)")
-    wide = st.filter(pl.col("W") >= W_PAPER_MIN)
-    # u_max/u_slip in 1.37-1.40 at every W and phi_bar: the worst width
-    if wide.height:
-        per = [(w, *_pooled(g, "u_max_over_u_slip"))
-               for (w,), g in wide.group_by(["W"], maintain_order=True)]
-        judged = [(w, m, e, *_judge(m, e, *RATIO_PAPER)) for w, m, e in per]
-        bad = [j for j in judged if j[3] == "does not hold"]
-        unknown = [j for j in judged if j[3] != "holds" and j[3] != "does not hold"]
-        show = bad or unknown or judged
-        verdict = ("does not hold" if bad else "cannot tell at this scale" if unknown
-                   else "holds")
-        add("u_max/u_slip = 1.37-1.40 for every W, φ̄", "1.37-1.40",
-            "; ".join(f"W = {w:g}: {pm(m, e, 3)}" for w, m, e, *_ in judged), verdict,
-            "; ".join(f"W = {w:g}: {far}" for w, _, _, _, far in show))
-    else:
-        add("u_max/u_slip = 1.37-1.40 for every W, φ̄", "1.37-1.40", "-",
-            "cannot tell at this scale", scale_why + " (000: W = 60-150)")
-    # the plug's phi, l_c, Omega/omega: pooled over 000's widths
-    for col, claim, paper, (lo, hi) in (
-            ("phi_plug", "plug φ ≈ 0.63", "0.63", PHI_PLUG_PRINTED),
-            ("l_c", "conduction length l_c = 11.5 d", "11.5", L_C_PRINTED),
-            ("omega_ratio_shearing", "Ω/ω → 1/2 in the shear zones", "1/2",
-             OMEGA_RATIO_PAPER)):
-        if not wide.height:
-            add(claim, paper, "-", "cannot tell at this scale", scale_why)
-            continue
-        m, e = _pooled(wide, col)
-        verdict, far = _judge(m, e, lo, hi)
-        add(claim, paper, pm(m, e, 4 if col == "phi_plug" else 3), verdict,
-            far + f" (W = {', '.join(f'{w:g}' for w in sorted(set(wide['W'])))})")
-    # mu_wall: independent of W (the widest two at each phi_bar), falls as phi_bar rises
-    mw = []
-    for (phi,), g in wide.group_by(["phi_bar"]):
-        g = g.sort("W")
-        if g.height >= 2:
-            a, b = g.row(0, named=True), g.row(-1, named=True)
-            mw.append((phi, b["wall_friction"] - a["wall_friction"],
-                       math.hypot(a["wall_friction_se"], b["wall_friction_se"])))
-    if mw:
-        zs = [dv / e for _, dv, e in mw]
-        ok = all(math.isfinite(z) for z in zs)
-        verdict = ("cannot tell at this scale" if not ok else
-                   "holds" if all(agrees(z) for z in zs) else "does not hold")
-        add("μ_wall independent of W", "independent of W (fig. 7b)",
-            "; ".join(f"φ̄ = {p:g}: {dv:+.4f} ± {e:.4f}" for p, dv, e in mw), verdict,
-            "change from the narrowest to the widest of 000's widths")
-    else:
-        add("μ_wall independent of W", "independent of W (fig. 7b)", "-",
-            "cannot tell at this scale", scale_why + " (two steady widths >= 60 needed)")
-    # phi_ad at 000's widths, as its other claims (its fig. 13 is from those channels); a fit
-    # whose own SE exceeds 000's +- 0.002 agrees with anything near 0.59 and so cannot
-    # confirm it: "holds" needs that resolution (a fit that far off still does not hold)
-    at_paper = (profiles.filter(pl.col("W") >= W_PAPER_MIN) if profiles is not None
-                and profiles.height else pl.DataFrame())
-    if at_paper.height:
-        judged = []
-        for name, f in _kinetic_fits(at_paper):
-            v, e = f["phi_ad"], math.hypot(f["phi_ad_se"], PHI_AD_PAPER[1])
-            judged.append((name.split(" ")[0], v, e,
-                           *_judge(v, e, PHI_AD_PAPER[0], PHI_AD_PAPER[0],
-                                   resolve=(f["phi_ad_se"], PHI_AD_PAPER[1]))))
-        verdict = ("does not hold" if any(j[3] == "does not hold" for j in judged)
-                   else "holds" if all(j[3] == "holds" for j in judged)
-                   else "cannot tell at this scale")
-        add("φ_ad: the kinetic coefficients diverge at 0.59 ± 0.002 (fig. 13)",
-            "0.59 ± 0.002", "; ".join(f"{n}: {pm(v, e, 4)}" for n, v, e, *_ in judged),
-            verdict, "; ".join(f"{n}: {far}" for n, _, _, _, far in judged)
-            + " (the SE with 000's ± 0.002)")
-    elif profiles is not None:
-        add("φ_ad: the kinetic coefficients diverge at 0.59 ± 0.002 (fig. 13)",
-            "0.59 ± 0.002", "-", "cannot tell at this scale", scale_why
-            + " (a loose zone at W >= 60 needed)")
-    # the states: steady at 0.59-0.61, fluctuating at 0.62, jammed above (W >= 60)
-    flow = points.filter((pl.col("parent") == "") & (pl.col("W") >= W_PAPER_MIN)) \
-        if points.height else points
-    if flow.height:
-        want = {0.59: "steady", 0.60: "steady", 0.61: "steady", 0.62: "fluctuating"}
-        seen = [(r["W"], r["phi_bar"], r["state_000"])
-                for r in with_state_000(flow).iter_rows(named=True)
-                if round(r["phi_bar"], 2) in want and r["state_000"] is not None]
-        miss = [(w, p, st_) for w, p, st_ in seen if st_ != want[round(p, 2)]]
-        add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
-            "steady / fluctuating / jammed", f"{len(seen) - len(miss)} of {len(seen)} runs "
-            "as 000", "cannot tell at this scale" if not seen else
-            "holds" if not miss else "does not hold",
-            "; ".join(f"W = {w:g}, φ̄ = {p:g}: {st_}" for w, p, st_ in miss)
-            or ("no run's v_cm state recorded" if not seen else "φ̄ tested: " + ", ".join(
-                f"{p:g}" for p in sorted({p for _, p, _ in seen}))))
-    else:
-        add("states: steady at φ̄ 0.59-0.61, fluctuating at 0.62, jammed above",
-            "steady / fluctuating / jammed", "-", "cannot tell at this scale",
-            "no run at W >= 60")
-    return pl.DataFrame(rows)
-
-
-def _verdict_section(points: pl.DataFrame, values: pl.DataFrame,
-                     profiles: pl.DataFrame) -> list[str]:
-    """000's claims, one line each (:func:`verdicts`)."""
-    if not points.height:
-        return []
-    tab = verdicts(points, values, profiles if profiles.height else None)
-    drifts = drift_reasons(points, values)
-    count = {v: int((tab["verdict"] == v).sum())
-             for v in ("holds", "does not hold", "cannot tell at this scale")}
-    return ["## 000's claims: verdicts", "",
-            f"Each claim against this dataset: 'holds' within {AGREE_SIGMA:g} SEs of 000's "
-            "value (its printed digits' interval), 'does not hold' beyond, 'cannot tell at "
-            f"this scale' without a point at 000's widths (W >= {W_PAPER_MIN:g}; the scaling "
-            f"claims two steady widths >= {W_SCALING_MIN:g}) or without an SE. "
-            + ", ".join(f"{k}: {n}" for k, n in count.items()) + ".", "", md_table(tab), "",
-            *([*drifts, ""] if drifts else [])]
-
-
 #: the states of a run whose flow still speeds up or slows down (flow_state's trend test)
 MOVING = (FlowState.ACCELERATING.value, FlowState.DECELERATING.value)
 
@@ -1072,7 +742,7 @@ def unsettled_lines(flow: pl.DataFrame) -> list[str]:
 def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
     """The answers to the paper's claims, in words, from the tables below (``values``:
     :func:`point_values`)."""
-    steady = _main_steady(values)
+    steady = main_steady(values)
     out = ["## Findings", ""]
     # (a drifting run with its v_cm state, 000's)
     flow = with_state_000(points.filter(pl.col("parent") == "")).with_columns(
@@ -1193,7 +863,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     every_depth = point_values(points, audit_factors(audit)) if points.height \
         else pl.DataFrame()
     values = main_depth(every_depth)
-    steady = _main_steady(values)
+    steady = main_steady(values)
     means = mean_profiles(profiles)
     figdir = path.parent / f"{path.stem}_figures"
     lines = [f"# Reproducing 000: the channel across W and φ̄ ({plan.name} campaign)", "",
@@ -1203,7 +873,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
              f"`pl.read_parquet('{out}/points.parquet')` (one row per run; also "
              "`profiles.parquet`, half profiles with SEs and zone labels, `zones.parquet`, "
              "zone means, and `se_vs_time.parquet`). Section numbers (§) are 000's.", "",
-             *_verdict_section(points, values, profiles), *findings(points, values),
+             *verdict_lines(points, values, profiles), *findings(points, values),
              *_depth_section(every_depth), *_runs_section(points, plan)]
     figs: list[Path] = []
     sections = [_stiffness_section(points, values, profiles, means, zones, figdir),
@@ -1217,6 +887,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     for text, f in sections:
         lines += text
         figs += f
+    lines += shape_lines(points, POINT_BY)
     lines += ["## Figures", ""] + [f"![{p.stem}]({p.relative_to(path.parent)})"
                                    for p in figs] + [""]
     if points.height and points["steps"].sum():

@@ -63,9 +63,13 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
     if not a.only_report:
         run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler, threads=a.threads)
-    # (the report is of the whole plan: what is left of it, its cost, whatever was selected)
-    path = write_report(out, Path(a.report) if a.report else out / "report.md", whole,
-                        **{k: getattr(a, k) for k in options or {}})
+    from .engine import dataset_lock
+
+    # (the report is of the whole plan: what is left of it, its cost, whatever was selected;
+    # it reads the tables whole, so not while a process beside this one appends a row)
+    with dataset_lock(out):
+        path = write_report(out, Path(a.report) if a.report else out / "report.md", whole,
+                            **{k: getattr(a, k) for k in options or {}})
     print(f"report: {path}")
 
 

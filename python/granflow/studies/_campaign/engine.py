@@ -15,12 +15,13 @@ from there). A :class:`~granflow.errors.GranflowError` ends a point with
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
 import os
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,32 @@ import pyarrow as pa
 from granflow.errors import DilationError, GranflowError
 
 from . import progress
+
+#: the lock file of a dataset directory (:func:`dataset_lock`)
+LOCK_NAME = ".lock"
+
+
+@contextlib.contextmanager
+def dataset_lock(out: str | os.PathLike[str]) -> Iterator[None]:
+    """Hold the dataset directory ``out`` for one process at a time while it reads and
+    rewrites its tables: the documented way to run a campaign's points side by side is a
+    process per point into one ``OUT``, and each appends its finished row by reading the
+    table and writing it whole (:func:`write_rows`), so two finishing together would lose a
+    row. An advisory ``flock`` on ``OUT/.lock`` (released with the process, so a crash
+    leaves no stale lock); where the platform has no ``fcntl``, no lock."""
+    try:
+        import fcntl
+    except ImportError:  # (not POSIX)
+        yield
+        return
+    outp = Path(out)
+    outp.mkdir(parents=True, exist_ok=True)
+    with open(outp / LOCK_NAME, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def write_rows(f: Path, rows: Sequence[Mapping[str, Any]], append: bool = False,
@@ -319,8 +346,13 @@ def reanalyse(study: Study, cls: type, plan: Any, out: str | os.PathLike[str]) -
     run goes on with it from its checkpoint. Points that ended with an error, or without a
     work directory, are kept as they are, with their rows of the other tables; so are the
     rows a recomputed row does not give (:meth:`Study.final`'s). Returns the number of
-    points dropped."""
-    outp = Path(out)
+    points dropped. Holds the dataset (:func:`dataset_lock`) from its reading to its
+    writing."""
+    with dataset_lock(out):
+        return _reanalyse(study, cls, plan, Path(out))
+
+
+def _reanalyse(study: Study, cls: type, plan: Any, outp: Path) -> int:
     keep: list[dict[str, Any]] = []
     old_rows = {k: _rows_by_key(outp / f"{stem}.parquet", cls) for k, stem in
                 study.tables.items()}
@@ -367,8 +399,12 @@ def add_final_rows(study: Study, cls: type, plan: Any, out: str | os.PathLike[st
     """Give the finished points of ``out`` that lack them the rows of :meth:`Study.final`,
     measured on the last state kept in their work directory (points finished before the
     study measured them; one without a checkpoint stays without). Returns how many points
-    gained rows."""
-    outp = Path(out)
+    gained rows. Holds the dataset (:func:`dataset_lock`) throughout."""
+    with dataset_lock(out):
+        return _add_final_rows(study, cls, plan, Path(out))
+
+
+def _add_final_rows(study: Study, cls: type, plan: Any, outp: Path) -> int:
     f = outp / "points.parquet"
     if not f.exists():
         return 0
@@ -443,19 +479,30 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
                             threads=threads):
         extras = {stem: row.pop(k, []) for k, stem in study.tables.items()}
         key = point_of(cls, row).key
-        if key in stale:
-            for f in (outp / "points.parquet",
-                      *(outp / f"{stem}.parquet" for stem in extras)):
-                drop_key(f, cls, key)
-        write_rows(outp / "points.parquet", [row], append=True, point=cls)
-        for stem, rows in extras.items():
-            write_rows(outp / f"{stem}.parquet", rows, append=True, point=cls)
+        append_point(outp, cls, row, extras, replace=key in stale)
         finished.add(key)
         for k in (key, *study.starts_from(point_of(cls, row))):
             tidy(k)
         log(f"  {key}: {study.describe(row)}")
     f = outp / "points.parquet"
     return pl.read_parquet(f) if f.exists() else pl.DataFrame()
+
+
+def append_point(out: Path, cls: type, row: Mapping[str, Any],
+                 extras: Mapping[str, Sequence[Mapping[str, Any]]], *,
+                 replace: bool = False) -> None:
+    """Append a finished point's ``row`` to ``out/points.parquet`` and its rows of further
+    tables (``extras``: file stem -> rows) to theirs, holding the dataset
+    (:func:`dataset_lock`); ``replace``: first drop the point's old rows from each (a row from
+    before the present stop rule)."""
+    with dataset_lock(out):
+        if replace:
+            key = point_of(cls, row).key
+            for f in (out / "points.parquet", *(out / f"{stem}.parquet" for stem in extras)):
+                drop_key(f, cls, key)
+        write_rows(out / "points.parquet", [row], append=True, point=cls)
+        for stem, rows in extras.items():
+            write_rows(out / f"{stem}.parquet", rows, append=True, point=cls)
 
 
 def point_fields(plan: Any) -> dict[str, tuple[Any, ...]]:
