@@ -236,8 +236,19 @@ def test_a_branch_starts_from_its_parents_kept_copy_which_stays_until_the_branch
         tmp_path: Path):
     quiet = {"workers": 1, "log": lambda *_: None}
     run_points(Branching(), [Point("parent")], Plan(t_max=4.0), tmp_path, **quiet)
-    assert (tmp_path / "progress" / "parent" / "pack.json").exists()  # (a branch needs it)
+    kept = tmp_path / "progress" / "parent"
+    assert (kept / "pack.json").exists()  # (a branch needs it)
+    # (its tables are not: the finished parent's copy keeps the checkpoint alone)
+    assert sorted(f.name for f in kept.iterdir()) == ["checkpoint.gfck.zst", "meta.json",
+                                                      "pack.json"]
     shutil.rmtree(tmp_path / "work")  # (the branch runs on a new machine)
+    # (a reanalysis there keeps the parent's row: its restored work directory has no tables)
+    from granflow.studies._campaign.progress import restore
+
+    restore(kept, tmp_path / "work" / "parent")
+    before = pl.read_parquet(tmp_path / "points.parquet")
+    assert reanalyse(Branching(), Point, Plan(t_max=4.0), tmp_path) == 0
+    assert pl.read_parquet(tmp_path / "points.parquet").equals(before)
     d = run_points(Branching(), [Point("child")], Plan(t_max=6.0), tmp_path, **quiet)
     child = d.filter(pl.col("name") == "child").row(0, named=True)
     assert child["stints"] == 6 and child["t_run"] == 6.0  # (4 of the parent's, 2 of its own)

@@ -361,7 +361,9 @@ def _reanalyse(study: Study, cls: type, plan: Any, outp: Path) -> int:
     for old in pl.read_parquet(outp / "points.parquet").iter_rows(named=True):
         point = point_of(cls, old)
         d = outp / "work" / point.key
-        if not (d / "meta.json").exists() or old["state"] in ERROR_STATES:
+        # (a work directory restored from a slimmed copy, for a branch, holds no tables)
+        if (not (d / "meta.json").exists() or old["state"] in ERROR_STATES
+                or not any(d.glob("*.parquet"))):
             keep.append(old)
             for k in study.tables:
                 extra[k] += old_rows[k].get(point.key, [])
@@ -469,9 +471,14 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
     finished = set(done)
 
     def tidy(key: str) -> None:
-        # (a finished point's kept copy goes once no unfinished point starts from it)
-        if key in finished and all(k in finished for k in study.dependents(key, plan)):
+        # (a finished point's kept copy goes once no unfinished point starts from it; until
+        # then it keeps only the checkpoint they start from)
+        if key not in finished:
+            return
+        if all(k in finished for k in study.dependents(key, plan)):
             progress.forget(kept_dir(outp / "work", key))
+        else:
+            progress.slim(kept_dir(outp / "work", key))
 
     for p in points:
         tidy(p.key)

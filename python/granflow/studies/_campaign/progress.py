@@ -9,8 +9,9 @@ far as the study's rows read them, ``Study.kept_tables``), and
 the copy (:func:`ahead`). The copy is
 written whole beside the old one and swapped in, so a crash while keeping leaves the previous
 stint's copy; the point's row, once appended to ``points.parquet``, ends its kept copy
-(:func:`forget`). The checkpoint restores bitwise, so a run resumed from the kept copy goes on
-exactly as the run that wrote it would have.
+(:func:`forget`), or, while other points still start from its final state, leaves its
+checkpoint alone (:func:`slim`). The checkpoint restores bitwise, so a run resumed from the
+kept copy goes on exactly as the run that wrote it would have.
 """
 
 from __future__ import annotations
@@ -119,6 +120,16 @@ def ahead(kept: Path, work_dir: Path) -> bool:
         return len(json.loads((d / "meta.json").read_text()).get("history", []))
 
     return stints(src) > stints(work_dir)
+
+
+def slim(kept: Path) -> None:
+    """Reduce the kept copy of a finished point whose final state other points still start
+    from (a branch's parent) to what they read: its checkpoint, ``pack.json`` and
+    ``meta.json``. Its row is written; its tables (a W = 60 channel's reach ~6 MB by its
+    end) would only be committed again and again until the last of them is done."""
+    for src in (kept, _beside(kept, ".old")):
+        for f in (src.glob("*.parquet") if src.is_dir() else ()):
+            f.unlink()
 
 
 def forget(kept: Path) -> None:
