@@ -1,4 +1,4 @@
-"""The 000 report's verdicts on 000's claims (issue 36, item 4): each claim "holds", "does
+"""The 000 report's verdicts on 000's claims: each claim "holds", "does
 not hold" or "cannot tell at this scale" against the dataset's points, with the measured
 value and the reason (:func:`verdicts`), and the report's section of them."""
 
@@ -100,7 +100,7 @@ def main_own(own: pl.DataFrame) -> pl.DataFrame:
 
 def verdicts(points: pl.DataFrame, values: pl.DataFrame,
              profiles: pl.DataFrame | None = None) -> pl.DataFrame:
-    """000's claims (issue 36, item 4), each "holds", "does not hold" (the measured value more
+    """000's claims, each "holds", "does not hold" (the measured value more
     than AGREE_SIGMA SEs outside 000's interval) or "cannot tell at this scale" (no point at
     000's widths, or no SE), with the measured value and the reason. At 000's widths only:
     W >= W_SCALING_MIN for the scaling claims (the two widest steady widths there), W >=
