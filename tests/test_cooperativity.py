@@ -97,6 +97,14 @@ def test_the_trend_test_finds_an_imposed_slope_and_none_in_a_constant():
     assert flat.z == pytest.approx(0.0) and flat.chi2_dof == pytest.approx(0.0)
     sloped = trend(base.with_columns((0.3 + 0.005 * pl.col("W")).alias("A")), "W")
     assert sloped.slope == pytest.approx(0.005) and sloped.z > 10
+    # one value of phi_bar, with SEs whose weighted mean does not round back to it exactly
+    # (a centred sum of squares of ~1e-30, not 0): no slope rather than one of SE ~1e13
+    one = pl.DataFrame({"W": [20.0, 40.0, 60.0, 100.0, 150.0], "phi_bar": [0.6] * 5,
+                        "A": [0.4, 0.5, 0.45, 0.42, 0.41],
+                        "A_se": [0.02763762458180572, 0.04681854876560065,
+                                 0.040976824151955075, 0.0011341865083372568,
+                                 0.0430128095527909]})
+    assert math.isnan(trend(one, "phi_bar").slope) and math.isfinite(trend(one, "W").z)
     with pytest.raises(ParameterError, match="against"):
         trend(base, "seed")
     with pytest.raises(ParameterError, match=">= 3"):

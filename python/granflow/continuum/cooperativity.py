@@ -219,6 +219,11 @@ def trend(table: pl.DataFrame, against: str, least: int = 3) -> Trend:
     w = 1.0 / s**2
     mean, mean_se = weighted_mean(a, s)
     chi2 = float(np.sum(w * (a - mean) ** 2)) / (a.size - 1)
+    # (one value of ``against``: no slope. Tested on the values themselves: their weighted
+    # mean's rounding leaves a centred sum of squares of ~1e-30 rather than 0, and whether it
+    # is exactly 0 depends on the machine's summation order)
+    if np.unique(v).size < 2:
+        return Trend(against, math.nan, math.nan, math.nan, mean, mean_se, chi2)
     vc = v - np.sum(w * v) / np.sum(w)
     sxx = float(np.sum(w * vc * vc))
     if sxx <= 0:
