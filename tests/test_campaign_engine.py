@@ -16,7 +16,7 @@ import pyarrow as pa
 import pytest
 from granflow.errors import DilationError, GranflowError, InstabilityError, ParameterError
 from granflow.studies._campaign import Study, reanalyse, run_point, run_points
-from granflow.studies._campaign.engine import is_current
+from granflow.studies._campaign.engine import fmt, is_current
 
 
 @dataclass(frozen=True)
@@ -186,6 +186,12 @@ def test_a_point_says_where_it_stands_after_every_stint(tmp_path: Path, capsys):
     # (its meta.json keeps the study's progress fields, for --status)
     meta = json.loads((tmp_path / "work" / "slow" / "meta.json").read_text())
     assert meta["progress"] == {"t_run": 4.0, "stints": 4}
+
+
+def test_a_progress_line_shows_a_dash_for_a_value_not_yet_measured():
+    row = {"u": 1.23456, "early": math.nan, "n": 7}
+    assert fmt(row, "u") == "1.235" and fmt(row, "n", "d") == "7"
+    assert fmt(row, "early") == "-" and fmt(row, "absent") == "-"
 
 
 @dataclass(frozen=True)

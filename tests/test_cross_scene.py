@@ -168,18 +168,25 @@ def test_a_missing_channel_dataset_is_named(tmp_path):
 
 def test_the_report_on_a_channel_dataset_without_wide_runs_says_so(tmp_path):
     # the widths campaign as it stands before its W >= 60 runs (the target's widths): the
-    # report is written from the committed calibration and says the target is not tested
-    channel, out = tmp_path / "channel", tmp_path / "cross"
+    # report is written from the committed calibration and says the target is not tested;
+    # its tables go to --tables, the calibration's directory is left as it was
+    channel, out, tables = tmp_path / "channel", tmp_path / "cross", tmp_path / "tables"
     channel.mkdir(), out.mkdir()
     for f in ("points", "profiles", "zones"):
         t = pl.read_parquet(WIDTHS / f"{f}.parquet")
         t.filter(pl.col("W") <= 40).write_parquet(channel / f"{f}.parquet")
     for f in CROSS.glob("*.parquet"):
         (out / f.name).write_bytes(f.read_bytes())
-    report = out / "cross_scene.md"
+    report = tmp_path / "cross_scene_widths.md"
     cs.main(["--full", "--out", str(out), "--report", str(report), "--only-report",
-             "--channel", str(channel)])
+             "--channel", str(channel), "--tables", str(tables)])
+    assert {f.name: f.read_bytes() for f in out.glob("*.parquet")} == {
+        f.name: f.read_bytes() for f in CROSS.glob("*.parquet")}
+    cases = pl.read_parquet(tables / "cases.parquet")
+    assert set(cases["W"].to_list()) == {20.0, 40.0}
+    assert (tables / "model.parquet").exists() and (tables / "verdict.parquet").exists()
     text = report.read_text()
+    assert f"--tables {tables}`" in text and f"`pl.read_parquet('{tables}/fits.parquet')`" in text
     assert "**No run at W >= 60**: the wide-channel target is not tested here." in text
     assert "Cannot tell: no run at W >= 60" in text
     # the held amplitude is tested on every run but the one it was fitted on: the reference

@@ -119,7 +119,9 @@ def main(argv: Iterable[str] | None = None) -> None:
         plans={"quick": (quick_plan, "minutes-long calibration subset (default)"),
                "full": (full_plan, "the calibration campaign")},
         reanalyse=reanalyse, run_campaign=run_campaign, write_report=write_report,
-        options={"channel": (CHANNEL_DATA, "the reproduce_000 dataset to predict")})
+        options={"channel": (CHANNEL_DATA, "the reproduce_000 dataset to predict"),
+                 "tables": ("", "where the comparison's tables go (default: OUT, beside the "
+                            "calibration)")})
 
 
 if __name__ == "__main__":

@@ -43,7 +43,8 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     ap.add_argument("--reanalyse", action="store_true",
                     help="first recompute the finished points from the data kept in OUT/work")
     for name, (default, text) in (options or {}).items():
-        ap.add_argument(f"--{name}", default=default, help=f"{text} (default {default})")
+        ap.add_argument(f"--{name}", default=default,
+                        help=f"{text} (default {default})" if default else text)
     a = ap.parse_args(list(argv) if argv is not None else None)
     chosen = next((n for n in plans if getattr(a, n)), "quick")
     whole = plans[chosen][0]()

@@ -140,9 +140,12 @@ def drop_key(f: Path, cls: type, key: str) -> None:
 
 
 def fmt(row: Mapping[str, Any], key: str, spec: str = ".4g") -> str:
-    """``row[key]`` formatted, ``nan`` when missing (progress lines)."""
+    """``row[key]`` formatted for a progress line; ``-`` while it is missing or not yet
+    measured (NaN: too few blocks so far), so the line never prints ``nan``."""
     v = row.get(key)
-    return format(v if v is not None else math.nan, spec)
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    return format(v, spec)
 
 
 class Study:
