@@ -16,7 +16,7 @@ import pyarrow as pa
 import pytest
 from granflow.errors import DilationError, GranflowError, InstabilityError, ParameterError
 from granflow.studies._campaign import Study, reanalyse, run_point, run_points
-from granflow.studies._campaign.engine import fmt, is_current
+from granflow.studies._campaign.engine import fmt, is_current, whole_plan
 
 
 @dataclass(frozen=True)
@@ -259,6 +259,32 @@ def test_a_branch_starts_from_its_parents_kept_copy_which_stays_until_the_branch
     child = d.filter(pl.col("name") == "child").row(0, named=True)
     assert child["stints"] == 6 and child["t_run"] == 6.0  # (4 of the parent's, 2 of its own)
     assert not list((tmp_path / "progress").iterdir())
+
+
+class BranchingInPlan(Branching):
+    """As Branching, but "child" depends on "parent" only where the plan holds it."""
+
+    def dependents(self, key: str, plan: Plans) -> tuple[str, ...]:
+        return tuple(p.name for p in plan.points if key == "parent" and p.name == "child")
+
+
+def test_a_selected_piece_keeps_the_copies_that_the_whole_plan_starts_from(tmp_path: Path):
+    from granflow.studies._campaign.command import select
+
+    quiet = {"workers": 1, "log": lambda *_: None}
+    whole = Plans(points=(Point("parent"), Point("child")), t_max=4.0)
+    part = select(whole, "^parent$")
+    assert part.points == (Point("parent"),) and whole_plan(part) is whole
+    run_points(BranchingInPlan(), part.points, part, tmp_path / "a", **quiet)
+    assert (tmp_path / "a" / "progress" / "parent" / "pack.json").exists()
+    # (the piece alone, as the engine saw it before: no point of it starts from the parent)
+    alone = Plans(points=(Point("parent"),), t_max=4.0)
+    run_points(BranchingInPlan(), alone.points, alone, tmp_path / "b", **quiet)
+    assert not (tmp_path / "b" / "progress" / "parent").exists()
+    # (run as a piece of the whole plan, the copy comes back from the work directory)
+    run_points(BranchingInPlan(), part.points, part, tmp_path / "b", **quiet)
+    assert sorted(f.name for f in (tmp_path / "b" / "progress" / "parent").iterdir()) == [
+        "checkpoint.gfck.zst", "meta.json", "pack.json"]
 
 
 def test_a_work_directory_behind_the_committed_copy_is_not_run_on(tmp_path: Path,

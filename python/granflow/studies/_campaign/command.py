@@ -104,7 +104,7 @@ def select(plan: Any, pattern: str) -> Any:
 
     from granflow.errors import ParameterError
 
-    from .engine import point_fields
+    from .engine import part_of, point_fields
 
     try:
         rx = re.compile(pattern)
@@ -117,4 +117,4 @@ def select(plan: Any, pattern: str) -> Any:
         raise ParameterError(f"invalid select = {pattern!r}: allowed a pattern matching at "
                              f"least one point key of the {plan.name} plan (e.g. "
                              f"{next(iter(plan.points)).key!r})")
-    return dataclasses.replace(plan, **kept)
+    return part_of(dataclasses.replace(plan, **kept), plan)

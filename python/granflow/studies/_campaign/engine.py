@@ -447,6 +447,19 @@ def _context(info: Mapping[str, Any], d: Path) -> dict[str, Any]:
     return dict(json.loads(header or "{}"))
 
 
+def part_of(part: Any, whole: Any) -> Any:
+    """``part`` (a plan with some of ``whole``'s points: ``--select``) remembering ``whole``,
+    so that a finished point's kept copy stays while a point of the whole plan starts from it
+    (:meth:`Study.dependents`), selected or not."""
+    object.__setattr__(part, "_whole_plan", whole_plan(whole))
+    return part
+
+
+def whole_plan(plan: Any) -> Any:
+    """The plan ``plan`` is a part of (:func:`part_of`), else ``plan`` itself."""
+    return getattr(plan, "_whole_plan", plan)
+
+
 def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.PathLike[str], *,
                workers: int | None = None, scheduler: str | None = None,
                threads: int | None = None, log: Callable[[str], Any] = print,
@@ -478,10 +491,15 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
         # then it keeps only the checkpoint they start from)
         if key not in finished:
             return
-        if all(k in finished for k in study.dependents(key, plan)):
-            progress.forget(kept_dir(outp / "work", key))
-        else:
-            progress.slim(kept_dir(outp / "work", key))
+        kept = kept_dir(outp / "work", key)
+        if all(k in finished for k in study.dependents(key, whole_plan(plan))):
+            progress.forget(kept)
+            return
+        if not kept.exists():
+            # (a copy that a piece of the campaign forgot, not seeing the branches: kept
+            # again from the work directory where that still holds the final state)
+            progress.keep(outp / "work" / key, kept, {})
+        progress.slim(kept)
 
     for p in points:
         tidy(p.key)
