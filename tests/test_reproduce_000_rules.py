@@ -19,7 +19,7 @@ from granflow.analysis import channel_profiles as cp
 from granflow.analysis.stats import MIN_SE_BLOCKS, jackknife_se
 from granflow.studies import reproduce_000 as rp
 from granflow.studies.reproduce_000_report import write_report
-from granflow.studies.reproduce_000_report_values import POINT_BY, refuse_few_blocks
+from granflow.studies.reproduce_000_report_values import POINT_BY, main_steady, refuse_few_blocks
 
 W = 20.0
 #: window duration and sample interval of the synthetic tables (the campaign's)
@@ -841,6 +841,16 @@ def test_the_ratio_is_judged_on_its_own_correlation_time_where_the_level_leaves_
     assert ov["replicas"].to_list() == [2]
     text = "\n".join(shape_lines(runs, POINT_BY))
     assert "1.3635 ± 0.0009" in text and "u_max/u_slip z = +1.2" in text, text
+    # the per-width ratio (findings, fig. 5's table and the extrapolation) takes it alike
+    from granflow.studies.reproduce_000_report import ratio_by_width
+    from granflow.studies.reproduce_000_report_claims import with_own_ratio
+
+    at = pl.col("phi_bar") == 0.6  # (the point the runs belong to; 0.59 keeps no SE)
+    st = with_own_ratio(main_steady(blind), runs)
+    assert st.sort("phi_bar")["ratio_how"].to_list() == ["", " (own τ, 2 runs)"]
+    row = ratio_by_width(st.filter(at)).row(0, named=True)
+    assert row["u_max/u_slip"] == "1.3635 ± 0.0009 (own τ, 2 runs)" and not row["SE"]
+    assert with_own_ratio(main_steady(values), runs)["ratio_how"].to_list() == ["", ""]
 
 
 def test_a_row_carries_the_shape_on_its_own_correlation_time(rows):

@@ -6,6 +6,7 @@ the DEM's bins against the cell's law, and the time it took."""
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -407,7 +408,14 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     pred.residuals.write_parquet(cmp_dir / "residuals.parquet")
     pred.boundary.write_parquet(cmp_dir / "boundary.parquet")
     pred.dem_phi.write_parquet(cmp_dir / "dem_phi.parquet")
-    cases = channel_cases(channel)
+    # (the channel runs channel_cases leaves out, unconverged, are named in the report too)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        cases = channel_cases(channel)
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    left_out = sorted({str(w.message).split(" (include_unconverged")[0]
+                       for w in caught if "are left out" in str(w.message)})
     verdicts = verdict_table(zone_errors(cases, pred.profiles))
     verdicts.write_parquet(cmp_dir / "verdict.parquet")
     figdir = path.parent / f"{path.stem}_figures"
@@ -449,7 +457,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         + ("beside them" if cmp_dir == out else f"in `{cmp_dir}`") + ". Channel "
         "data: "
         f"`{channel}/points.parquet` and `profiles.parquet` (the reproduce_000 campaign, kn = "
-        "1e5).", "",
+        "1e5)." + "".join(f" {m}." for m in left_out), "",
         "## Time", "",
         f"* calibration: {points.height} cell runs, {core / 3600:.2f} core-hours in all "
         "(one thread a run; CPU time where recorded, else wall time);",

@@ -40,7 +40,12 @@ from .reproduce_000_figures import (
     plot_fig13,
     plot_profiles,
 )
-from .reproduce_000_report_claims import PHI_AD_PAPER, kinetic_fits, verdict_lines
+from .reproduce_000_report_claims import (
+    PHI_AD_PAPER,
+    kinetic_fits,
+    verdict_lines,
+    with_own_ratio,
+)
 from .reproduce_000_report_cost import cost_section, remaining
 from .reproduce_000_report_creep import creep_lines
 from .reproduce_000_report_order import order_lines
@@ -173,8 +178,9 @@ def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
         else:
             m, e = float(g["u_max_over_u_slip"].mean()), math.nan  # type: ignore[arg-type]
         gap = max(RATIO_PAPER[0] - m, m - RATIO_PAPER[1], 0.0)
+        how = "".join(sorted(set(g["ratio_how"]))) if "ratio_how" in g.columns else ""
         rows.append({"W": w, "phi_bar": ", ".join(f"{p:g}" for p in g["phi_bar"]),
-                     "u_max/u_slip": pm(m, e, 4), "below 1.37 by": gap,
+                     "u_max/u_slip": pm(m, e, 4) + how, "below 1.37 by": gap,
                      "in SEs": interval_z(m, e, *RATIO_PAPER),
                      "SE": "" if math.isfinite(e) else NED})
     return pl.DataFrame(rows)
@@ -256,7 +262,7 @@ def zone_table(steady: pl.DataFrame) -> pl.DataFrame:
             vs = "inside" if gap == 0.0 else f"{'below' if ph < lo else 'above'} by " \
                 f"{gap:.4f} ({gap / ph_se:.1f} SEs)"
         rows.append({"W": r["W"], "φ̄": r["phi_bar"],
-                     "xi_plug": NED if not math.isfinite(r["xi_plug"]) else r["xi_plug"],
+                     "xi_plug": NED if not math.isfinite(r["xi_plug"]) else f"{r['xi_plug']:.4g}",
                      "xi_ad": pm(r["xi_ad"], r["xi_ad_se"], 1),
                      "φ plug": NED if not math.isfinite(ph) else pm(ph, ph_se, 4),
                      "φ plug vs 0.625-0.635": vs,
@@ -491,7 +497,9 @@ def _drift_line(points: pl.DataFrame) -> str:
         for r in d.iter_rows(named=True)) + "."
 
 
-def _fig5_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) -> Section:
+def _fig5_section(steady: pl.DataFrame, ratios: pl.DataFrame, profiles: pl.DataFrame,
+                  figdir: Path) -> Section:
+    # (``ratios``: ``steady`` with_own_ratio, for the ratio's table and trend)
     figs = [plot_fig4(steady, profiles, POINT_BY, figdir / "fig4_velocity.png"),
             plot_fig5(with_scaled(steady), figdir / "fig5_scaling.png", RATIO_PAPER),
             plot_fig7(with_scaled(steady), figdir / "fig7_stress_wall_friction.png")]
@@ -504,8 +512,8 @@ def _fig5_section(steady: pl.DataFrame, profiles: pl.DataFrame, figdir: Path) ->
              "the audit finds the run SEs too small (the SEs column says so):", "",
              md_table(se_parts_table(steady)), "",
              "u_max/u_slip per width (000: 1.37-1.40 for W = 60-150 and every φ̄):", "",
-             md_table(ratio_by_width(steady), {"below 1.37 by": ".3f", "in SEs": ".1f"}), ""]
-    trend = ratio_trend(steady)
+             md_table(ratio_by_width(ratios), {"below 1.37 by": ".3f", "in SEs": ".1f"}), ""]
+    trend = ratio_trend(ratios)
     if trend.height:
         lines += ["Does it approach 1.37-1.40 as W grows? u_max/u_slip = r_inf - c/W "
                   "fitted per φ̄ over the widths with a steady flow (two widths: the line "
@@ -759,12 +767,13 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
         out.append(f"- W = {w:g}: {states} (000, W = 60-150: steady for φ̄ = 0.59-0.61, "
                    "fluctuating at 0.62, jammed above).")
     out += unsettled_lines(flow)
-    ratios = ratio_by_width(steady) if steady.height else pl.DataFrame()
-    for r in ratios.iter_rows(named=True):
+    ratios = with_own_ratio(steady, points)
+    ratio_rows = ratio_by_width(ratios) if steady.height else pl.DataFrame()
+    for r in ratio_rows.iter_rows(named=True):
         out.append(f"- u_max/u_slip at W = {r['W']:g}: {r['u_max/u_slip']} (φ̄ = "
                    f"{r['phi_bar']}), {r['below 1.37 by']:.3f} below 000's 1.37"
                    + (f" (SE: {NED})." if r["SE"] else f", {r['in SEs']:.1f} SEs."))
-    for r in (ratio_trend(steady) if steady.height else pl.DataFrame()).iter_rows(named=True):
+    for r in (ratio_trend(ratios) if steady.height else pl.DataFrame()).iter_rows(named=True):
         verdict = {"yes": "within 2 SEs of 000's 1.37-1.40.",
                    "no": "outside 000's 1.37-1.40 by more than 2 SEs."}.get(
             r["reaches 1.37-1.40"], f"no SE ({NED}): whether it reaches 1.37-1.40 is not "
@@ -805,9 +814,10 @@ def findings(points: pl.DataFrame, values: pl.DataFrame) -> list[str]:
             f"- Width: 000's ratio and collapse claims are for W = 60-150 (collapse only for "
             f"W >= 100); the widest steady channel here: {widest}."
             + (" u_max/u_slip (the per-width lines above) rises with W toward 1.37-1.40"
-               + (f" (values; their SEs: {NED})." if any(ratios["SE"]) else ".")
-               if ratios.height > 1 and bool(np.all(np.diff(
-                   [float(x.split(" ")[0]) for x in ratios["u_max/u_slip"]]) > 0)) else "")]
+               + (f" (values; their SEs: {NED})." if any(ratio_rows["SE"]) else ".")
+               if ratio_rows.height > 1 and bool(np.all(np.diff(
+                   [float(x.split(" ")[0]) for x in ratio_rows["u_max/u_slip"]]) > 0))
+               else "")]
     if fam.height > 1:
         base = fam.filter((pl.col("kn") / 1e5 - 1).abs() < 1e-9)
         if base.height:
@@ -881,7 +891,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
                     "tau_max" in points.columns and points["tau_max"].null_count() == 0)),
                 (_coverage_section(points, out, audit), [])]
     if steady.height:
-        sections[:0] = [_fig5_section(steady, means, figdir),
+        sections[:0] = [_fig5_section(steady, with_own_ratio(steady, points), means, figdir),
                         _zones_section(steady, profiles, means,
                                        _of_steady(points, _read(out, "order")), figdir)]
     for text, f in sections:

@@ -98,6 +98,29 @@ def main_own(own: pl.DataFrame) -> pl.DataFrame:
     return main_depth(steady_points(own).filter(~pl.col("branch")))
 
 
+def with_own_ratio(steady: pl.DataFrame, points: pl.DataFrame) -> pl.DataFrame:
+    """``steady`` (:func:`main_steady`'s points) with a point's u_max/u_slip and its SE
+    taken on the ratio's own correlation time (:func:`main_own`) where the level's blocks
+    gave it no SE (a slow mode: too few blocks) and its runs carry one; ``ratio_how`` says
+    so (" (own τ, N runs)"), "" where the point keeps its own."""
+    d = steady.with_columns(pl.lit("").alias("ratio_how"))
+    own = main_own(own_values(points, POINT_BY)) if d.height else pl.DataFrame()
+    if not own.height:
+        return d
+    d = d.join(own.select(*POINT_BY, pl.col(OWN_RATIO).alias("_r"),
+                          pl.col(f"{OWN_RATIO}_se").alias("_r_se"),
+                          pl.col("replicas").alias("_n")), on=list(POINT_BY), how="left")
+    use = (~pl.col("u_max_over_u_slip_se").is_finite().fill_null(False)
+           & pl.col("_r_se").is_finite().fill_null(False))
+    return d.with_columns(
+        pl.when(use).then(pl.col("_r")).otherwise(pl.col("u_max_over_u_slip"))
+        .alias("u_max_over_u_slip"),
+        pl.when(use).then(pl.col("_r_se")).otherwise(pl.col("u_max_over_u_slip_se"))
+        .alias("u_max_over_u_slip_se"),
+        pl.when(use).then(pl.format(" (own τ, {} runs)", pl.col("_n")))
+        .otherwise(pl.col("ratio_how")).alias("ratio_how")).drop("_r", "_r_se", "_n")
+
+
 def verdicts(points: pl.DataFrame, values: pl.DataFrame,
              profiles: pl.DataFrame | None = None) -> pl.DataFrame:
     """000's claims, each "holds", "does not hold" (the measured value more
@@ -109,7 +132,6 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     divergence of the kinetic coefficients in the loose zone (:func:`phi_ad_fits`) at W >=
     W_PAPER_MIN; it holds only where the fit resolves 000's +- 0.002."""
     st = main_steady(values)
-    own = own_values(points, POINT_BY)
     rows: list[dict[str, Any]] = []
 
     def add(claim: str, paper: str, measured: str, verdict: str, why: str) -> None:
@@ -146,19 +168,11 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
         add(name + " (W ≥ 100)", f"exponent {n0:g}", f"exponent {pm(n, e, 2)}", verdict,
             far + f" ({len(ns)} φ̄)")
     wide = st.filter(pl.col("W") >= W_PAPER_MIN)
-    # u_max/u_slip in 1.37-1.40 at every W and phi_bar: the worst width; a width whose steady
-    # points have no SE (the level's slow mode: too few blocks) is judged on the ratio's own
-    # correlation time where its runs carry it (reproduce_000_report_shape)
-    per = [(w, *pooled(g, "u_max_over_u_slip"), "")
-           for (w,), g in wide.group_by(["W"], maintain_order=True)]
-    have = {w for w, _, e, _ in per if math.isfinite(e)}
-    by_own = [(w, *pooled(g.rename({OWN_RATIO: "r", f"{OWN_RATIO}_se": "r_se"}), "r"),
-               f" (own τ, {g['replicas'].sum()} runs)")
-              for (w,), g in main_own(own).filter((pl.col("W") >= W_PAPER_MIN)
-                                                   & ~pl.col("W").is_in(list(have)))
-              .group_by(["W"], maintain_order=True)]
-    # (a width with neither stays, without an SE: "cannot tell" there)
-    per = [p for p in per if p[0] in have or p[0] not in {o[0] for o in by_own}] + by_own
+    # u_max/u_slip in 1.37-1.40 at every W and phi_bar: the worst width; a point without an
+    # SE (the level's slow mode: too few blocks) on the ratio's own correlation time where
+    # its runs carry it (with_own_ratio); a width with neither: "cannot tell" there
+    per = [(w, *pooled(g, "u_max_over_u_slip"), "".join(sorted(set(g["ratio_how"]))))
+           for (w,), g in with_own_ratio(wide, points).group_by(["W"], maintain_order=True)]
     if per:
         per.sort(key=lambda p: p[0])
         judged = [(w, m, e, *judge(m, e, *RATIO_PAPER), how) for w, m, e, how in per]

@@ -13,7 +13,7 @@ import polars as pl
 
 from granflow.analysis.order import CUTOFF
 
-from ._campaign import md_table
+from ._campaign import md_table, pm
 
 #: crystal-like fraction above which a region counts as ordered (a crystal nucleus spans a
 #: few percent of a random packing's spheres at most: granflow.analysis.order's tests)
@@ -65,7 +65,8 @@ def order_table(runs: pl.DataFrame, values: pl.DataFrame, by: Sequence[str]) -> 
             out[label] = (f"{x.mean():.3f}" + (f" ({x.min():.3f}-{x.max():.3f})"
                                                if x.size > 1 else "")) if x.size else "-"
         v = values.filter(*(pl.col(c) == row[c] for c in by))
-        out["φ plug"] = (f"{v['phi_plug'][0]:.4f} ± {v['phi_plug_se'][0]:.4f}"
+        # (pm: "-" where the point's plug has no value, as where its blocks are too few)
+        out["φ plug"] = (pm(v["phi_plug"][0], v["phi_plug_se"][0], 4)
                          if v.height and v["phi_plug"][0] is not None else "-")
         rows.append(out)
     return pl.DataFrame(rows).sort("W", "φ̄")
