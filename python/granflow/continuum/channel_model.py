@@ -93,6 +93,59 @@ PROFILE_KEY = ("W", "phi_bar", "kn", "parent", "B", "H", "seed", "prep")
 REPLICAS = ("apart", "mean")
 
 
+def left_out_runs(channel: str | os.PathLike[str], kn: float = 1e5,
+                  B: float | None = None) -> list[str]:
+    """The steady runs :func:`channel_cases` leaves out of ``channel`` with these arguments
+    (another depth than the main one; not converged), one sentence per reason; none: []."""
+    return [note for note, _ in _steady_points(Path(channel), kn, False, B)[1]]
+
+
+def _steady_points(d: Path, kn: float, include_unconverged: bool, B: float | None
+                   ) -> tuple[pl.DataFrame, list[tuple[str, str]], str]:
+    """The points of the dataset ``d`` that :func:`channel_cases` takes, the (sentence, hint)
+    of each group it leaves out, and the allowed-input phrase of its errors."""
+    what = "allowed a reproduce_000 dataset, e.g. docs/data/reproduce_000 of a granflow checkout"
+    missing = [f for f in ("points.parquet", "profiles.parquet") if not (d / f).is_file()]
+    if missing:
+        raise ParameterError(f"invalid channel dataset {os.fspath(d)!r}: no "
+                             f"{', '.join(missing)} ({what})")
+    pts = pl.read_parquet(d / "points.parquet")
+    if "u_slip" not in pts.columns:  # (no run of the dataset was ever analysed as steady)
+        states = sorted(set(pts["state"].to_list())) if "state" in pts.columns else []
+        raise ParameterError(f"invalid channel dataset {os.fspath(d)!r}: no steady run "
+                             f"at kn = {kn:g} (its states: {', '.join(states) or 'none'}; "
+                             f"{what})")
+    lacking = [c for c in CASE_COLUMNS if c not in pts.columns]
+    if lacking:
+        raise ParameterError(f"invalid channel dataset {os.fspath(d)!r}: its points "
+                             f"lack the columns {', '.join(lacking)} ({what})")
+    pts = pts.filter((pl.col("kn") == kn) & pl.col("u_slip").is_not_null())
+    notes: list[tuple[str, str]] = []
+    if "B" in pts.columns and pts.height:
+        depth = float(pts["B"].mode().sort()[0]) if B is None else float(B)
+        if depth not in pts["B"].to_list():
+            raise ParameterError(f"invalid B = {B!r}: no steady run at that depth; allowed one "
+                                 "of " + ", ".join(f"{b:g}" for b in pts["B"].unique().sort()))
+        other = pts.filter(pl.col("B") != depth)
+        if other.height and B is None:
+            notes.append((f"channel_cases: {other.height} steady run(s) at another depth than "
+                          f"the main B = {depth:g} are left out: "
+                          + "; ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g}, B = "
+                                      f"{r['B']:g}" for r in other.iter_rows(named=True)),
+                          "B= takes them"))
+        pts = pts.filter(pl.col("B") == depth)
+    if "converged" in pts.columns and not include_unconverged:
+        left = pts.filter(~pl.col("converged"))
+        if left.height:
+            notes.append((f"channel_cases: {left.height} steady run(s) of {os.fspath(d)} "
+                          "did not converge and are left out: "
+                          + "; ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g} "
+                                      f"({r['state']})" for r in left.iter_rows(named=True)),
+                          "include_unconverged=True takes them"))
+        pts = pts.filter(pl.col("converged"))
+    return pts, notes, what
+
+
 def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
                   include_unconverged: bool = False, replicas: str = "apart",
                   B: float | None = None) -> list[ChannelCase]:
@@ -103,49 +156,15 @@ def channel_cases(channel: str | os.PathLike[str], kn: float = 1e5,
     most replicas give), sigma_xx and delta_0.95 the replicas' means. ``B``: None takes the
     dataset's most common depth (the main one; a depth check's other depths are left out with
     a warning naming them). Runs that did not meet their plan's stop rule (``converged``
-    false) are left out with a warning naming them, unless ``include_unconverged``."""
-    d = Path(channel)
+    false) are left out with a warning naming them, unless ``include_unconverged``
+    (:func:`left_out_runs` lists them)."""
     if replicas not in REPLICAS:
         raise ParameterError(f"invalid replicas = {replicas!r}: allowed one of "
                              f"{', '.join(map(repr, REPLICAS))}")
-    what = "allowed a reproduce_000 dataset, e.g. docs/data/reproduce_000 of a granflow checkout"
-    missing = [f for f in ("points.parquet", "profiles.parquet") if not (d / f).is_file()]
-    if missing:
-        raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no "
-                             f"{', '.join(missing)} ({what})")
-    pts = pl.read_parquet(d / "points.parquet")
-    if "u_slip" not in pts.columns:  # (no run of the dataset was ever analysed as steady)
-        states = sorted(set(pts["state"].to_list())) if "state" in pts.columns else []
-        raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: no steady run "
-                             f"at kn = {kn:g} (its states: {', '.join(states) or 'none'}; "
-                             f"{what})")
-    lacking = [c for c in CASE_COLUMNS if c not in pts.columns]
-    if lacking:
-        raise ParameterError(f"invalid channel dataset {os.fspath(channel)!r}: its points "
-                             f"lack the columns {', '.join(lacking)} ({what})")
-    pts = pts.filter((pl.col("kn") == kn) & pl.col("u_slip").is_not_null())
-    if "B" in pts.columns and pts.height:
-        depth = float(pts["B"].mode().sort()[0]) if B is None else float(B)
-        if depth not in pts["B"].to_list():
-            raise ParameterError(f"invalid B = {B!r}: no steady run at that depth; allowed one "
-                                 "of " + ", ".join(f"{b:g}" for b in pts["B"].unique().sort()))
-        other = pts.filter(pl.col("B") != depth)
-        if other.height and B is None:
-            warnings.warn(f"channel_cases: {other.height} steady run(s) at another depth than "
-                          f"the main B = {depth:g} are left out: "
-                          + "; ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g}, B = "
-                                      f"{r['B']:g}" for r in other.iter_rows(named=True))
-                          + " (B= takes them)", UserWarning, stacklevel=2)
-        pts = pts.filter(pl.col("B") == depth)
-    if "converged" in pts.columns and not include_unconverged:
-        left = pts.filter(~pl.col("converged"))
-        if left.height:
-            warnings.warn(f"channel_cases: {left.height} steady run(s) of {os.fspath(channel)} "
-                          "did not converge and are left out: "
-                          + "; ".join(f"W = {r['W']:g}, phi_bar = {r['phi_bar']:g} "
-                                      f"({r['state']})" for r in left.iter_rows(named=True))
-                          + " (include_unconverged=True takes them)", UserWarning, stacklevel=2)
-        pts = pts.filter(pl.col("converged"))
+    d = Path(channel)
+    pts, notes, what = _steady_points(d, kn, include_unconverged, B)
+    for note, hint in notes:
+        warnings.warn(f"{note} ({hint})", UserWarning, stacklevel=2)
     prof = pl.read_parquet(d / "profiles.parquet")
     key = [c for c in PROFILE_KEY if c in pts.columns and c in prof.columns]
     runs = []

@@ -6,7 +6,6 @@ the DEM's bins against the cell's law, and the time it took."""
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ from granflow.continuum.channel_model import (
     ChannelCase,
     Prediction,
     channel_cases,
+    left_out_runs,
     predict,
 )
 from granflow.continuum.verdict import (
@@ -408,14 +408,8 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
     pred.residuals.write_parquet(cmp_dir / "residuals.parquet")
     pred.boundary.write_parquet(cmp_dir / "boundary.parquet")
     pred.dem_phi.write_parquet(cmp_dir / "dem_phi.parquet")
-    # (the channel runs channel_cases leaves out, unconverged, are named in the report too)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        cases = channel_cases(channel)
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    left_out = sorted({str(w.message).split(" (include_unconverged")[0]
-                       for w in caught if "are left out" in str(w.message)})
+    cases = channel_cases(channel)
+    left_out = left_out_runs(channel)  # (named in the report, not only warned)
     verdicts = verdict_table(zone_errors(cases, pred.profiles))
     verdicts.write_parquet(cmp_dir / "verdict.parquet")
     figdir = path.parent / f"{path.stem}_figures"

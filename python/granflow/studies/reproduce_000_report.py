@@ -43,6 +43,7 @@ from .reproduce_000_figures import (
 from .reproduce_000_report_claims import (
     PHI_AD_PAPER,
     kinetic_fits,
+    ratio_how,
     verdict_lines,
     with_own_ratio,
 )
@@ -168,7 +169,8 @@ def se_parts_table(steady: pl.DataFrame, cols: Sequence[str] = REPORTED) -> pl.D
 
 
 def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
-    """u_max/u_slip per W (inverse-variance mean over phi_bar, rheology.pool_realizations;
+    """u_max/u_slip per W of ``steady`` (with_own_ratio's points: the value says how it was
+    got) (inverse-variance mean over phi_bar, rheology.pool_realizations;
     the plain mean, without an SE, where a phi_bar has none) and its distance from 000's range
     1.37-1.40, in SEs where there are SEs."""
     rows = []
@@ -178,9 +180,8 @@ def ratio_by_width(steady: pl.DataFrame) -> pl.DataFrame:
         else:
             m, e = float(g["u_max_over_u_slip"].mean()), math.nan  # type: ignore[arg-type]
         gap = max(RATIO_PAPER[0] - m, m - RATIO_PAPER[1], 0.0)
-        how = "".join(sorted(set(g["ratio_how"]))) if "ratio_how" in g.columns else ""
         rows.append({"W": w, "phi_bar": ", ".join(f"{p:g}" for p in g["phi_bar"]),
-                     "u_max/u_slip": pm(m, e, 4) + how, "below 1.37 by": gap,
+                     "u_max/u_slip": pm(m, e, 4) + ratio_how(g), "below 1.37 by": gap,
                      "in SEs": interval_z(m, e, *RATIO_PAPER),
                      "SE": "" if math.isfinite(e) else NED})
     return pl.DataFrame(rows)

@@ -121,6 +121,12 @@ def with_own_ratio(steady: pl.DataFrame, points: pl.DataFrame) -> pl.DataFrame:
         .otherwise(pl.col("ratio_how")).alias("ratio_how")).drop("_r", "_r_se", "_n")
 
 
+def ratio_how(points: pl.DataFrame) -> str:
+    """How a group of :func:`with_own_ratio`'s points got u_max/u_slip ("" or
+    " (own τ, N runs)"), once per kind."""
+    return "".join(sorted(set(points["ratio_how"])))
+
+
 def verdicts(points: pl.DataFrame, values: pl.DataFrame,
              profiles: pl.DataFrame | None = None) -> pl.DataFrame:
     """000's claims, each "holds", "does not hold" (the measured value more
@@ -171,7 +177,7 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     # u_max/u_slip in 1.37-1.40 at every W and phi_bar: the worst width; a point without an
     # SE (the level's slow mode: too few blocks) on the ratio's own correlation time where
     # its runs carry it (with_own_ratio); a width with neither: "cannot tell" there
-    per = [(w, *pooled(g, "u_max_over_u_slip"), "".join(sorted(set(g["ratio_how"]))))
+    per = [(w, *pooled(g, "u_max_over_u_slip"), ratio_how(g))
            for (w,), g in with_own_ratio(wide, points).group_by(["W"], maintain_order=True)]
     if per:
         per.sort(key=lambda p: p[0])
