@@ -97,6 +97,41 @@ def _runs(seeds: dict[float, int], n: int = 2000, spread: float = 0.0) -> pl.Dat
     return pl.DataFrame(rows)
 
 
+def _law_points(b: float, noise: float = 2e-4, seed: int = 3) -> pl.DataFrame:
+    """One run per point at p = 2e-4 on I_g = 1e-3 to 0.8: mu_g on Jop's form plus 0.1 I,
+    phi = 0.591 - 0.15 I^0.9 - b I^2, Gaussian noise of the stated SE (noise)."""
+    rng = np.random.default_rng(seed)
+    ig = np.geomspace(1e-3, 0.8, 18)
+    mu = rh.jop_value(ig, 0.36, 0.8, 0.5) + 0.1 * ig
+    phi = 0.591 - 0.15 * ig**0.9 - b * ig**2
+    return pl.DataFrame([
+        {"p_ext": 2e-4, "N": 2000, "tau_ratio": 0.0, "inertial_number": float(i), "seed": 1,
+         "state": "flowing", "converged": True, "I_g": float(i), "I_g_se": 0.0,
+         "mu_g": float(m + rng.normal(0, noise)), "mu_g_se": noise,
+         "phi": float(p + rng.normal(0, noise)), "phi_se": noise,
+         "sigma_g_p": 1.05, "sigma_g_p_se": 1e-3} for i, m, p in zip(ig, mu, phi, strict=True)])
+
+
+def test_the_form_comparison_tells_a_form_that_misses_from_one_that_fits():
+    forms = acal.form_comparison(_law_points(b=0.1))
+
+    def chi2(q: str, form: int, span: str = "all") -> float:
+        name = acal.FORMS[q][form][0]
+        return forms.filter((pl.col("quantity") == q) & (pl.col("form") == name)
+                            & (pl.col("range") == span))["red_chi2"].item()
+
+    # the data's own forms fit to chi2 ~ 1; one power of I across 1e-3 to 0.8 does not
+    assert chi2("phi", 1) < 2.0 and chi2("mu_g", 1) < 2.0
+    assert chi2("phi", 0) > 5.0 and chi2("mu_g", 0) > 5.0
+    # on the lower range the curvature at the top is gone: the three constants fit
+    assert chi2("phi", 0, f"I_g <= {acal.FORM_I_MAX:g}") < chi2("phi", 0) / 3
+    # without the I^2 term (4.7) fits everywhere
+    plain = acal.form_comparison(_law_points(b=0.0))
+    name = acal.FORMS["phi"][0][0]
+    assert plain.filter((pl.col("form") == name) & (pl.col("range") == "all"))[
+        "red_chi2"].item() < 2.0
+
+
 def test_a_calibration_point_is_its_replicas_mean_with_both_ses():
     runs = pl.concat([_runs({0.5: 3, 0.6: 1}, spread=0.01), _runs({0.5: 1}, n=10_000)])
     # a run that did not converge is no replica

@@ -5,8 +5,10 @@ form and phi(I_g), per cell pressure, with their covariances, as a
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import polars as pl
@@ -159,4 +161,88 @@ def continuation_check(points: pl.DataFrame, n_draws: int = 400,
                     "stress_law": float(law[k]), "band": float(band[k]), "diff": diff,
                     "z": diff / se if se > 0 else float("nan"),
                     "where": ("overlap" if r["I_g"] >= cal.law.I_min else "continuation")})
+    return pl.DataFrame(rows)
+
+
+#: the calibration's I_g below which the channel's dense zone shears (I = 1e-4 to 0.04, times
+#: ~2 for I_g), with room: the range on which :func:`form_comparison` also judges each form
+FORM_I_MAX = 0.35
+
+
+def _jop(I: FloatArray, ms: float, m2: float, i0: float) -> FloatArray:  # noqa: E741
+    return ms + (m2 - ms) / (1.0 + i0 / I)
+
+
+def _jop_linear(I: FloatArray, ms: float, m2: float, i0: float,  # noqa: E741
+                c: float) -> FloatArray:
+    return _jop(I, ms, m2, i0) + c * I
+
+
+def _phi47(I: FloatArray, p0: float, a: float, e: float) -> FloatArray:  # noqa: E741
+    return p0 - a * I**e
+
+
+def _phi47_quadratic(I: FloatArray, p0: float, a: float, e: float,  # noqa: E741
+                     b: float) -> FloatArray:
+    return _phi47(I, p0, a, e) - b * I**2
+
+
+#: the candidate forms per quantity: (name, function, first guess); the first of each is the
+#: form the models use (Jop et al.'s mu, 002's (4.7) phi)
+FORMS = {
+    "mu_g": (("Jop (mu_s, mu_2, I_0)", _jop, (0.36, 0.8, 0.5)),
+             ("Jop + c I", _jop_linear, (0.36, 0.8, 0.5, 0.0))),
+    "phi": (("(4.7) phi_0 - A4 I^a4", _phi47, (0.59, 0.16, 1.0)),
+            ("(4.7) - B I^2", _phi47_quadratic, (0.59, 0.16, 1.0, 0.0))),
+}
+
+
+def _fit_form(f: Any, guess: tuple[float, ...], I: FloatArray, y: FloatArray,  # noqa: E741
+              y_se: FloatArray, I_se: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """Weighted least squares with the SE of I propagated by effective variance (sigma^2 =
+    y_se^2 + (f'(I) I_se)^2, refitted twice, as analysis.rheology.fit_law); the parameters
+    and each point's z, or None where the fit fails."""
+    from scipy.optimize import curve_fit
+
+    sig, pp = y_se, np.asarray(guess, dtype=np.float64)
+    try:
+        for _ in range(3):
+            pp, _cov = curve_fit(f, I, y, p0=pp, sigma=sig, absolute_sigma=True,
+                                 maxfev=50_000)
+            h = 1e-6 * I
+            slope = (f(I + h, *pp) - f(I - h, *pp)) / (2 * h)
+            sig = np.hypot(y_se, slope * I_se)
+    except (RuntimeError, ValueError):
+        return None
+    return pp, (y - f(I, *pp)) / sig
+
+
+def form_comparison(points: pl.DataFrame, i_max: float = FORM_I_MAX) -> pl.DataFrame:
+    """Which form fits the pooled calibration points (:func:`pooled_points`), per pressure
+    and quantity: each candidate of :data:`FORMS` fitted over all points and over those with
+    I_g <= ``i_max`` (the channel's range), with its reduced chi^2, largest |z| and the z of
+    the slowest point (a form that misses at low I shows there first). Points with a
+    non-positive SE are left out; a fit with no degree of freedom left is not made."""
+    pooled = pooled_points(points)
+    rows = []
+    for p in sorted(set(pooled["p_ext"].to_list())):
+        d = pooled.filter(pl.col("p_ext") == p).sort("I_g")
+        ig, ig_se = d["I_g"].to_numpy(), d["I_g_se"].fill_nan(0.0).to_numpy()
+        for col, forms in FORMS.items():
+            y, se = d[col].to_numpy(), d[f"{col}_se"].to_numpy()
+            good = np.isfinite(y) & np.isfinite(se) & (se > 0) & (ig > 0)
+            for span, keep in (("all", good), (f"I_g <= {i_max:g}", good & (ig <= i_max))):
+                for name, f, guess in forms:
+                    n, k = int(keep.sum()), len(guess)
+                    fit = _fit_form(f, guess, ig[keep], y[keep], se[keep],
+                                    ig_se[keep]) if n > k else None
+                    row = {"p_ext": float(p), "quantity": col, "form": name, "range": span,
+                           "n": n, "constants": k, "red_chi2": math.nan,
+                           "max_abs_z": math.nan, "z_slowest": math.nan,
+                           "I_g_slowest": float(ig[keep][0]) if n else math.nan}
+                    if fit is not None:
+                        _pp, z = fit
+                        row.update(red_chi2=float((z**2).sum() / (n - k)),
+                                   max_abs_z=float(np.abs(z).max()), z_slowest=float(z[0]))
+                    rows.append(row)
     return pl.DataFrame(rows)

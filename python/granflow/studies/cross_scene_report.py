@@ -17,9 +17,12 @@ from matplotlib.figure import Figure
 from granflow.analysis.coverage import coverage, steady_rows
 from granflow.analysis.plots import ZONE_COLOURS, save_figure
 from granflow.continuum.calibration import (
+    FORM_I_MAX,
+    FORMS,
     POINT,
     continuation_check,
     fits_table,
+    form_comparison,
     steady_points,
 )
 from granflow.continuum.channel_model import (
@@ -498,6 +501,7 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         md_table(fits.drop("cov", "equation"), {"p_ext": ".0e"}), "",
         range_sentence(pred.cal) + " " + _near_yield(points, lo), "",
         *continuation_lines(continuation_check(points)),
+        *form_lines(form_comparison(points)),
         "## 2. The models (granflow.continuum)", "",
         "Fully developed flow: sigma_xx uniform (the DEM run's mean), d sigma_xy/dx = "
         "-rho_p phi g from the centre (000 B1-B2), phi = phi(I) in both models. Boundary data "
@@ -623,6 +627,49 @@ def continuation_lines(check: pl.DataFrame) -> list[str]:
             "continuation before there were rate points "
             f"(`granflow.continuum.calibration.continuation_check`). {verdict}:", "",
             md_table(shown, {"p_ext": ".0e", "I (imposed)": ".0e"}), ""]
+
+
+def form_lines(forms: pl.DataFrame) -> list[str]:
+    """Which form fits the calibration over the whole range and over the channel's
+    (calibration.form_comparison): a table and its verdict in words."""
+    if forms.is_empty():
+        return []
+    fit = forms.filter(pl.col("red_chi2") <= 2.0)
+    first = {q: f[0][0] for q, f in FORMS.items()}
+
+    def fits(q: str, span: str) -> str:
+        ok = fit.filter((pl.col("quantity") == q) & (pl.col("range") == span))
+        n_p = forms["p_ext"].n_unique()
+        names = [n for n in dict.fromkeys(ok["form"].to_list())
+                 if ok.filter(pl.col("form") == n).height == n_p]
+        return ", ".join(names) if names else "none of them"
+
+    spans = list(dict.fromkeys(forms["range"].to_list()))
+    own_all = forms.filter(pl.col("form").is_in(list(first.values()))
+                           & (pl.col("range") == "all"))
+
+    def slowest(q: str) -> float:
+        z = own_all.filter(pl.col("quantity") == q)["z_slowest"].abs()
+        return float(z.max()) if z.len() else math.nan
+
+    worst, worst_mu = slowest("phi"), slowest("mu_g")
+    words = "; ".join(f"{q} over {s}: {fits(q, s)}" for q in FORMS for s in spans)
+    shown = forms.select("p_ext", "quantity", "form", "range", "n", "constants",
+                         pl.col("red_chi2").round(2), pl.col("max_abs_z").round(1),
+                         pl.col("I_g_slowest").round_sig_figs(2),
+                         pl.col("z_slowest").round(1))
+    return ["**Which form fits.** The pooled points (both drives) fitted with the models' "
+            f"forms ({first['mu_g']}; {first['phi']}) and with one more constant each, over "
+            f"all points and over I_g <= {FORM_I_MAX:g} (the channel's dense zone, I_g up to "
+            "~0.08, with room); effective variance for the SE of I "
+            "(`granflow.continuum.calibration.form_comparison`). Within the SEs (red chi2 "
+            f"<= 2 at every pressure): {words}. The models' forms over all points: the "
+            f"slowest point's |z| up to {worst:.1f} (phi) and {worst_mu:.1f} (mu_g): one "
+            "power of I cannot follow both the low-I dilatancy and the fast points' "
+            "curvature, so the rate points' offsets from the stress law's continuation "
+            "above are, where they exceed 2 SEs, the form's and not the drive's (compare the "
+            "'overlap' rows).", "",
+            md_table(shown, {"p_ext": ".0e"}), ""]
 
 
 #: the slowest shear in the channel's dense zone (I = 1e-4 to 0.04, docs/cross_scene.md)

@@ -784,7 +784,9 @@ def points_markdown(pool: pl.DataFrame) -> str:
         v, e = r[c], r[f"{c}_se"]
         w, b = r[f"{c}_se_within"], r[f"{c}_se_between"]
         dig = 5 if abs(v) < 0.01 else 4
-        return (f"{v:.{dig}f} ± {e:.{dig}f} ({w:.{dig}f} / {b:.{dig}f})" if math.isfinite(e)
+        # (one replica has no between-replica SE: '-', not 'nan')
+        bs = f"{b:.{dig}f}" if math.isfinite(b) else "-"
+        return (f"{v:.{dig}f} ± {e:.{dig}f} ({w:.{dig}f} / {bs})" if math.isfinite(e)
                 else f"{v:.{dig}f} (not enough data)")
 
     def agree(r: Mapping[str, Any]) -> str:
