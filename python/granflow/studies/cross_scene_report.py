@@ -650,7 +650,7 @@ def form_lines(forms: pl.DataFrame) -> list[str]:
 
     def slowest(q: str) -> float:
         z = own_all.filter(pl.col("quantity") == q)["z_slowest"].abs()
-        return float(z.max()) if z.len() else math.nan
+        return float(z.to_numpy().max()) if z.len() else math.nan
 
     worst, worst_mu = slowest("phi"), slowest("mu_g")
     words = "; ".join(f"{q} over {s}: {fits(q, s)}" for q in FORMS for s in spans)
