@@ -156,8 +156,10 @@ def test_rate_points_are_checked_against_the_stress_law_alone():
     assert check["quantity"].to_list() == ["mu_g", "phi"]
     assert check["where"].to_list() == ["continuation"] * 2
     assert (check["z"].abs() < 3).all() and (check["replicas"] == 3).all()
-    # a rate point 0.02 above the law (20 SEs) is found; one inside the range is "overlap"
-    off = [_on_law(0.0, 1e-3, s, 0.002, shift=0.02, rng=rng) for s in (1, 2, 3)]
+    # a rate point 0.04 above the law (40 SEs; the four-constant continuation's band at
+    # I_g = 0.002, from six stress points at 0.02-0.5, is ~0.005) is found; one inside the
+    # range is "overlap"
+    off = [_on_law(0.0, 1e-3, s, 0.002, shift=0.04, rng=rng) for s in (1, 2, 3)]
     mid = [_on_law(0.0, 0.02, s, 0.05, rng=rng) for s in (1, 2, 3)]
     check = continuation_check(pl.DataFrame(stress + off + mid)).filter(
         pl.col("quantity") == "mu_g").sort("I_g")

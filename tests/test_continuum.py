@@ -472,3 +472,26 @@ def test_given_phi_bad_input_is_refused():
     # a stress ratio beyond the calibrated range, as the models' own solvers refuse it
     with pytest.raises(ParameterError, match=r"mu\(I_max\)"):
         solve_nonlocal_given_phi(const_phi_law(I_max=0.01), 0.5, prob, [0.0, 30.0], [0.6, 0.6])
+
+
+def test_the_fourth_constants_are_refused_where_the_law_would_not_invert():
+    jop = dict(mu_s=0.36, A_mu=0.9, a_mu=0.9, phi_0=0.59, A_phi=0.12, a_phi=0.8, I_min=1e-3,
+               I_max=0.8, mu_form="jop")
+    LocalLaw(**jop, c_mu=-0.2, B_phi=0.05)  # the calibration's: mu still rising at I_max
+    # mu(I) would peak inside the calibrated range: no inverse there
+    with pytest.raises(ParameterError, match=r"invalid c_mu = -0\.5: allowed > -0\.28.*rising"):
+        LocalLaw(**jop, c_mu=-0.5)
+    with pytest.raises(ParameterError, match="invalid c_mu = 0.1: allowed 0 unless mu_form"):
+        LocalLaw(**{**jop, "mu_form": "power"}, c_mu=0.1)
+    # phi(I) would rise at I_max
+    with pytest.raises(ParameterError, match=r"invalid B_phi = -1\.0: allowed > .*falling"):
+        LocalLaw(**jop, B_phi=-1.0)
+    with pytest.raises(ParameterError, match="invalid c_mu = nan"):
+        LocalLaw(**jop, c_mu=float("nan"))
+    # draws with a 4x4 covariance move the fourth constant, with a 3x3 one hold it
+    law = LocalLaw(**jop, c_mu=-0.2, B_phi=0.05)
+    four = law.sample(np.eye(4) * 1e-8, np.eye(4) * 1e-10, 5, rng=1)
+    three = law.sample(np.eye(3) * 1e-8, np.eye(3) * 1e-10, 5, rng=1)
+    assert len({d.c_mu for d in four}) == 5 and {d.c_mu for d in three} == {-0.2}
+    with pytest.raises(ParameterError, match=r"(?s)mu_cov.*allowed a finite symmetric 3x3"):
+        LocalLaw(**{**jop, "mu_form": "power"}).sample(np.eye(4), np.eye(3), 1)

@@ -73,12 +73,13 @@ def test_the_cell_takes_the_channels_material():
         assert mat.with_(kn=kn).dt() == pytest.approx(dt)
 
 
-def test_a_calibration_needs_four_steady_points():
+def test_a_calibration_needs_five_steady_points():
     rows = [{"p_ext": 2e-4, "N": 2000, "tau_ratio": r, "seed": 1, "state": "flowing",
              "converged": True,
              "I_g": 0.1 * r, "I_g_se": 1e-3, "mu_g": r, "mu_g_se": 1e-3, "phi": 0.6 - r / 10,
-             "phi_se": 1e-3, "sigma_g_p": 1.05, "sigma_g_p_se": 1e-3} for r in (0.45, 0.5, 0.6)]
-    with pytest.raises(ParameterError, match="p_ext = 0.0002: 3 steady points"):
+             "phi_se": 1e-3, "sigma_g_p": 1.05, "sigma_g_p_se": 1e-3}
+            for r in (0.45, 0.5, 0.6, 0.7)]
+    with pytest.raises(ParameterError, match=r"p_ext = 0.0002: 4 steady points.*>= 5"):
         acal.calibrate(pl.DataFrame(rows))
 
 
@@ -114,22 +115,45 @@ def _law_points(b: float, noise: float = 2e-4, seed: int = 3) -> pl.DataFrame:
 
 def test_the_form_comparison_tells_a_form_that_misses_from_one_that_fits():
     forms = acal.form_comparison(_law_points(b=0.1))
+    models, three = 0, 1  # the models' four-constant forms, and the same less that constant
+
+    def row(q: str, form: int, span: str = "all") -> dict:
+        name = acal.FORMS[q][form]
+        return forms.filter((pl.col("quantity") == q) & (pl.col("form") == name)
+                            & (pl.col("range") == span)).row(0, named=True)
 
     def chi2(q: str, form: int, span: str = "all") -> float:
-        name = acal.FORMS[q][form][0]
-        return forms.filter((pl.col("quantity") == q) & (pl.col("form") == name)
-                            & (pl.col("range") == span))["red_chi2"].item()
+        return row(q, form, span)["red_chi2"]
 
     # the data's own forms fit to chi2 ~ 1; one power of I across 1e-3 to 0.8 does not
-    assert chi2("phi", 1) < 2.0 and chi2("mu_g", 1) < 2.0
-    assert chi2("phi", 0) > 5.0 and chi2("mu_g", 0) > 5.0
+    assert chi2("phi", models) < 2.0 and chi2("mu_g", models) < 2.0
+    assert chi2("phi", three) > 5.0 and chi2("mu_g", three) > 5.0
     # on the lower range the curvature at the top is gone: the three constants fit
-    assert chi2("phi", 0, f"I_g <= {acal.FORM_I_MAX:g}") < chi2("phi", 0) / 3
+    low = f"I_g <= {acal.FORM_I_MAX:g}"
+    assert chi2("phi", three, low) < chi2("phi", three) / 3
+    # the four-constant forms find the low-I constants the data were made with
+    for q, truth in (("mu_g", 0.36), ("phi", 0.591)):
+        r = row(q, models)
+        assert abs(r["low_I"] - truth) < 3 * r["low_I_se"]
     # without the I^2 term (4.7) fits everywhere
     plain = acal.form_comparison(_law_points(b=0.0))
-    name = acal.FORMS["phi"][0][0]
-    assert plain.filter((pl.col("form") == name) & (pl.col("range") == "all"))[
-        "red_chi2"].item() < 2.0
+    assert plain.filter((pl.col("form") == acal.FORMS["phi"][three])
+                        & (pl.col("range") == "all"))["red_chi2"].item() < 2.0
+
+
+def test_the_calibrated_law_takes_the_fourth_constants_and_inverts():
+    law = acal.calibrate(_law_points(b=0.1))[2e-4].law
+    assert law.mu_form == "jop" and law.c_mu == pytest.approx(0.1, abs=0.03)
+    assert law.B_phi == pytest.approx(0.1, abs=0.03)
+    ii = np.geomspace(1e-4, law.I_max, 50)
+    assert np.allclose(law.I_of_mu(law.mu(ii)), ii, rtol=1e-9)
+    # (mu - mu_s) dI/dmu against a central difference of the inverse
+    mu, h = law.mu(ii), 1e-7
+    num = (law.I_of_mu(mu + h) - law.I_of_mu(mu - h)) / (2 * h) * (mu - law.mu_s)
+    assert np.allclose(law.excess_dI_dmu(mu), num, rtol=1e-5)
+    inner = ii[:-1]
+    num_phi = (law.phi(inner * (1 + 1e-5)) - law.phi(inner * (1 - 1e-5))) / (2e-5 * inner)
+    assert np.allclose(law.dphi_dI(inner), num_phi, rtol=1e-6)
 
 
 def test_a_calibration_point_is_its_replicas_mean_with_both_ses():
@@ -254,8 +278,12 @@ def test_the_quick_chain_writes_its_datasets_and_report(quick):
     pts = pl.read_parquet(out / "points.parquet")
     assert pts.height == len(cs.quick_plan().points)
     fits = pl.read_parquet(out / "fits.parquet")
-    assert set(fits["law"].to_list()) == {"mu", "phi", "mu (4.2)"}
-    assert all(len(c) == 9 for c in fits["cov"].to_list())
+    assert set(fits["law"].to_list()) == {"mu", "phi", "mu (Jop)", "phi (4.7)", "mu (4.2)"}
+    # the models' laws carry four constants, the three-constant forms beside them three
+    four = fits["law"].is_in(["mu", "phi"])
+    assert fits.filter(four)["c3"].is_not_null().all()
+    assert fits.filter(~four)["c3"].is_null().all()
+    assert all(len(c) == (16 if f else 9) for c, f in zip(fits["cov"], four, strict=True))
     cases = pl.read_parquet(out / "cases.parquet")
     assert sorted(set(cases["W"].to_list())) == [20.0, 40.0, 60.0]
     # the local law cannot shear a channel whose wall stress ratio is below its yield ratio
@@ -317,6 +345,21 @@ def test_constants_save_and_load_the_same_laws_covariances_and_amplitude(constan
     # the bands' draws are the same from the loaded constants
     p = next(iter(constants.laws))
     assert back.sample(p, 3, seed=2) == constants.sample(p, 3, seed=2)
+
+
+def test_a_constants_table_from_before_the_fourth_constants_still_loads(tmp_path):
+    import pyarrow.parquet as pq
+
+    three = ModelConstants({2e-4: _LAW}, 0.5, covariances={2e-4: (np.eye(3) * 1e-8,
+                                                                  np.eye(3) * 1e-8)})
+    f = three.save(tmp_path / "model.parquet")
+    t = pq.read_table(f)
+    old = t.drop_columns(["c_mu", "B_phi"]).replace_schema_metadata(t.schema.metadata)
+    pq.write_table(old, f)
+    back = ModelConstants.load(f)
+    assert back.laws == three.laws and back.laws[2e-4].c_mu == 0.0
+    assert back.covariances[2e-4][0].shape == (3, 3)
+    assert back.sample(2e-4, 2, seed=1) == three.sample(2e-4, 2, seed=1)
 
 
 def test_a_file_that_is_not_a_constants_table_is_refused(tmp_path):

@@ -22,10 +22,11 @@ import numpy.typing as npt
 import polars as pl
 from scipy import optimize
 
+from granflow.errors import ParameterError
 from granflow.states import FlowState
 
 from ._numerics import quiet
-from .laws import jop_law, power_law
+from .laws import jop_law, jop_linear_law, power_law, power_quadratic_law
 from .stats import (
     DEFAULT_MIN_BLOCKS,
     DRIFT_Z,
@@ -542,6 +543,9 @@ class FitResult:
         """The fitted law at ``I``."""
         if self.law == JOP:
             return jop_value(I, *self.params.values())
+        if self.law in FOUR_CONSTANT:
+            return FOUR_CONSTANT[self.law].value(np.asarray(I, dtype=np.float64),
+                                                 *self.params.values())
         return law_value(self.law, I, *self.params.values())
 
 
@@ -710,6 +714,99 @@ def fit_jop(I: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike,  # noqa: E7
     err = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     return FitResult(JOP, JOP_EQUATION, dict(zip(names, map(float, p), strict=True)),
                      dict(zip(names, map(float, err), strict=True)), cov, chi2, n - 3, n, True)
+
+
+def jop_linear_value(I: npt.ArrayLike, mu_s: float, mu_2: float, I_0: float,  # noqa: E741
+                     c: float) -> FloatArray:
+    """Jop et al.'s mu(I) with a linear term, ``+ c I``, at ``I``."""
+    return jop_linear_law(np.asarray(I, dtype=np.float64), mu_s, mu_2 - mu_s, I_0, c)
+
+
+def phi_quadratic_value(I: npt.ArrayLike, phi_0: float, A4: float, a4: float,  # noqa: E741
+                        B: float) -> FloatArray:
+    """002's (4.7) with a quadratic term, ``- B I^2``, at ``I``."""
+    return power_quadratic_law(np.asarray(I, dtype=np.float64), phi_0, A4, a4, B)
+
+
+@dataclass(frozen=True)
+class FourConstantForm:
+    """A three-constant form with one more constant (the calibration's forms): its value, the
+    names of its constants and the bounds of the three it extends."""
+
+    equation: str
+    value: Any
+    names: tuple[str, str, str, str]
+    lower: tuple[float, float, float, float]
+    upper: tuple[float, float, float, float]
+
+
+#: Jop et al.'s mu(I) + c I
+JOP_LINEAR = "mu_jop_linear"
+#: 002's (4.7) phi(I) - B I^2
+PHI_QUADRATIC = "phi_quadratic"
+FOUR_CONSTANT = {
+    JOP_LINEAR: FourConstantForm(
+        "mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) + c I (Jop et al. 2006, a linear term)",
+        jop_linear_value, ("mu_s", "mu_2", "I_0", "c"),
+        (-np.inf, -np.inf, 1e-9, -np.inf), (np.inf, np.inf, np.inf, np.inf)),
+    PHI_QUADRATIC: FourConstantForm(
+        "phi = phi_0 - A4 I^a4 - B I^2 (002 (4.7), a quadratic term)",
+        phi_quadratic_value, ("phi_0", "A4", "a4", "B"),
+        (-np.inf, 0.0, 0.01, -np.inf), (np.inf, np.inf, 5.0, np.inf)),
+}
+
+
+@quiet
+def fit_four(law: str, I: npt.ArrayLike, y: npt.ArrayLike,  # noqa: E741
+             y_se: npt.ArrayLike, *, I_se: npt.ArrayLike | None = None) -> FitResult:
+    """Weighted fit of a form of :data:`FOUR_CONSTANT` (``law`` JOP_LINEAR or
+    PHI_QUADRATIC), started from the three-constant fit (:func:`fit_jop`, (4.7) by
+    :func:`fit_law`) with the fourth constant 0; the SE of I propagated by effective variance
+    as there (the slope taken numerically). Points as in :func:`fit_law`; fewer than 5 usable
+    points, or a failed start, give an unsuccessful result."""
+    if law not in FOUR_CONSTANT:
+        raise ParameterError(f"invalid law = {law!r}: allowed one of {sorted(FOUR_CONSTANT)}")
+    form = FOUR_CONSTANT[law]
+    ii, yy, sy = (np.asarray(v, dtype=np.float64) for v in (I, y, y_se))
+    si = np.zeros_like(ii) if I_se is None else np.asarray(I_se, dtype=np.float64)
+    ok = np.isfinite(ii) & np.isfinite(yy) & np.isfinite(sy) & (sy > 0) & (ii > 0)
+    ok &= np.isfinite(si)
+    ii, yy, sy, si = ii[ok], yy[ok], sy[ok], si[ok]
+    n = int(ii.size)
+    nan4 = dict.fromkeys(form.names, math.nan)
+
+    def failed(message: str) -> FitResult:
+        return FitResult(law, form.equation, nan4, dict(nan4), np.full((4, 4), np.nan),
+                         math.nan, n - 4, n, False, message)
+
+    if n < 5:
+        return failed("fewer than 5 usable points")
+    three = (fit_jop(ii, yy, sy, I_se=si) if law == JOP_LINEAR
+             else fit_law("phi", ii, yy, sy, I_se=si))
+    if not three.success:
+        return failed(f"the three-constant start failed: {three.message}")
+    lo, hi = np.asarray(form.lower), np.asarray(form.upper)
+    start = np.clip([*three.params.values(), 0.0], np.nextafter(lo, np.inf),
+                    np.nextafter(hi, -np.inf))
+    sigma = sy
+    try:
+        p, cov = optimize.curve_fit(form.value, ii, yy, p0=start, sigma=sigma,
+                                    absolute_sigma=True, bounds=(form.lower, form.upper),
+                                    maxfev=20000)
+        if I_se is not None:
+            h = 1e-6 * ii
+            slope = (form.value(ii + h, *p) - form.value(ii - h, *p)) / (2 * h)
+            sigma = np.sqrt(sy**2 + (slope * si) ** 2)
+            p, cov = optimize.curve_fit(form.value, ii, yy, p0=p, sigma=sigma,
+                                        absolute_sigma=True, bounds=(form.lower, form.upper),
+                                        maxfev=20000)
+    except (RuntimeError, ValueError) as exc:
+        return failed(str(exc))
+    chi2 = float(np.sum(((yy - form.value(ii, *p)) / sigma) ** 2))
+    err = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return FitResult(law, form.equation, dict(zip(form.names, map(float, p), strict=True)),
+                     dict(zip(form.names, map(float, err), strict=True)), cov, chi2, n - 4, n,
+                     True)
 
 
 @quiet

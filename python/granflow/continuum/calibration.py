@@ -1,14 +1,14 @@
 """The calibration of a local rheology from cell runs, stress- or rate-controlled (rows of the
 cell campaign with the gradient-frame columns, rheology.GRADIENT_COLUMNS): mu_g(I_g) in Jop et al.'s
-form and phi(I_g), per cell pressure, with their covariances, as a
-:class:`granflow.continuum.LocalLaw` (granflow.studies.cross_scene runs it)."""
+form and phi(I_g) in 002's (4.7), each with a fourth constant, per cell pressure, with their
+covariances, as a :class:`granflow.continuum.LocalLaw` (granflow.studies.cross_scene runs it);
+and which form fits (:func:`form_comparison`)."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 
 import numpy as np
 import polars as pl
@@ -30,8 +30,9 @@ class Calibration:
     phi_fit: FitResult
     law: LocalLaw
     points: pl.DataFrame
-    #: 002's (4.2) form fitted to the same points, for comparison (not used by the models)
-    mu_power: FitResult | None = None
+    #: the three-constant forms fitted to the same points, for comparison (not used by the
+    #: models): "mu (Jop)", "phi (4.7)" and 002's "mu (4.2)"
+    compared: dict[str, FitResult] = field(default_factory=dict)
 
     def covariances(self) -> tuple[FloatArray, FloatArray]:
         """The fits' covariances in the law's parameter order (LocalLaw.mu_covariance),
@@ -72,52 +73,61 @@ def pooled_points(points: pl.DataFrame) -> pl.DataFrame:
 
 def calibrate(points: pl.DataFrame) -> dict[float, Calibration]:
     """Fit mu_g(I_g) and phi(I_g) per cell pressure, with the SE of I_g propagated
-    (effective variance); the law's I range is the pooled points'. mu(I) takes Jop et al.'s
-    form, linear at small I: 002's (4.2), fitted beside it, fits these points worse (its chi^2
-    is in the report) and, with a1 < 1, continues to a yield ratio below the ratios at which
-    the cell arrests. Raises ParameterError when a pressure has fewer than 4 steady points."""
-    from granflow.analysis.rheology import fit_jop, fit_law
+    (effective variance); the law's I range is the pooled points'. The forms are Jop et al.'s
+    mu(I) + c I and (4.7) - B I^2 (rheology.fit_four): the three-constant forms fit the
+    points within their SEs only over the channel's range (I_g <= FORM_I_MAX), and over the
+    whole range trade the slow points against the fast points' curvature (the report's
+    :func:`form_comparison`). Jop's form, linear at small I, rather than 002's (4.2), which
+    with a1 < 1 continues to a yield ratio below the ratios at which the cell arrests; the
+    three-constant fits are kept beside (``compared``). Raises ParameterError when a pressure
+    has fewer than 5 steady points."""
+    from granflow.analysis.rheology import JOP_LINEAR, PHI_QUADRATIC, fit_four, fit_jop, fit_law
 
     out: dict[float, Calibration] = {}
     pooled = pooled_points(points)
     for p in sorted(set(pooled["p_ext"].to_list())):
         d = pooled.filter(pl.col("p_ext") == p).sort("I_g")
-        if d.height < 4:
+        if d.height < 5:
             raise ParameterError(f"invalid calibration at p_ext = {p:g}: {d.height} steady "
-                                 "points, allowed >= 4 (three fitted constants per law)")
+                                 "points, allowed >= 5 (four fitted constants per law)")
         ig, ig_se = d["I_g"].to_numpy(), d["I_g_se"].to_numpy()
-        mu_fit = fit_jop(ig, d["mu_g"].to_numpy(), d["mu_g_se"].to_numpy(), I_se=ig_se)
-        power = fit_law("mu1", ig, d["mu_g"].to_numpy(), d["mu_g_se"].to_numpy(), I_se=ig_se)
-        phi_fit = fit_law("phi", ig, d["phi"].to_numpy(), d["phi_se"].to_numpy(), I_se=ig_se)
+        mu, mu_se = d["mu_g"].to_numpy(), d["mu_g_se"].to_numpy()
+        phi, phi_se = d["phi"].to_numpy(), d["phi_se"].to_numpy()
+        mu_fit = fit_four(JOP_LINEAR, ig, mu, mu_se, I_se=ig_se)
+        phi_fit = fit_four(PHI_QUADRATIC, ig, phi, phi_se, I_se=ig_se)
         if not (mu_fit.success and phi_fit.success):
             raise ParameterError(f"invalid calibration at p_ext = {p:g}: the fits failed "
                                  f"({mu_fit.message or phi_fit.message})")
+        compared = {"mu (Jop)": fit_jop(ig, mu, mu_se, I_se=ig_se),
+                    "phi (4.7)": fit_law("phi", ig, phi, phi_se, I_se=ig_se),
+                    "mu (4.2)": fit_law("mu1", ig, mu, mu_se, I_se=ig_se)}
         law = LocalLaw.from_fits(mu_fit, phi_fit, float(ig.min()), float(ig.max()))
-        out[float(p)] = Calibration(float(p), mu_fit, phi_fit, law, d, power)
+        out[float(p)] = Calibration(float(p), mu_fit, phi_fit, law, d, compared)
     return out
 
 
 def fits_table(cal: Mapping[float, Calibration]) -> pl.DataFrame:
-    """One row per (pressure, law): constants c0, c1, c2 (named, in that order, in
-    ``constants``: e.g. mu_s, mu_2, I_0), their errors and covariance (row-major, in the
-    constants' order) both scaled by max(1, red chi^2), red chi^2, the I range; the committed
-    ``fits.parquet``. The models' constants (laws and amplitude) are
+    """One row per (pressure, law): constants c0-c3 (named, in that order, in ``constants``:
+    e.g. mu_s, mu_2, I_0, c; c3 null for a three-constant form), their errors and covariance
+    (row-major, in the constants' order) both scaled by max(1, red chi^2), red chi^2, the I
+    range; the committed ``fits.parquet``. Rows "mu" and "phi" are the models' laws, the others
+    :attr:`Calibration.compared`. The models' constants (laws and amplitude) are
     :class:`granflow.continuum.constants.ModelConstants` (``model.parquet``)."""
     rows = []
     for p, c in cal.items():
-        for name, f in (("mu", c.mu_fit), ("phi", c.phi_fit), ("mu (4.2)", c.mu_power)):
-            if f is None:
-                continue
-            (k0, k1, k2) = f.params
+        for name, f in (("mu", c.mu_fit), ("phi", c.phi_fit), *c.compared.items()):
             e = f.errors_scaled
-            rows.append({"p_ext": p, "law": name, "equation": f.equation,
-                         "constants": ", ".join(f.params),
-                         "c0": f.params[k0], "c0_se": e[k0], "c1": f.params[k1],
-                         "c1_se": e[k1], "c2": f.params[k2], "c2_se": e[k2],
-                         "red_chi2": f.red_chi2, "n": f.n,
+            row: dict[str, object] = {"p_ext": p, "law": name, "equation": f.equation,
+                                      "constants": ", ".join(f.params)}
+            keys = list(f.params)
+            for k in range(4):
+                row[f"c{k}"] = f.params[keys[k]] if k < len(keys) else None
+                row[f"c{k}_se"] = e[keys[k]] if k < len(keys) else None
+            rows.append({**row, "red_chi2": f.red_chi2, "n": f.n,
                          "cov": [float(v) for v in f.cov_scaled.ravel()],
                          "I_min": c.law.I_min, "I_max": c.law.I_max})
-    return pl.DataFrame(rows)
+    return pl.DataFrame(rows, schema_overrides={f"c{k}{t}": pl.Float64 for k in range(4)
+                                                for t in ("", "_se")})
 
 
 #: the checked quantities of a rate-controlled point against the stress-controlled law
@@ -169,80 +179,68 @@ def continuation_check(points: pl.DataFrame, n_draws: int = 400,
 FORM_I_MAX = 0.35
 
 
-def _jop(I: FloatArray, ms: float, m2: float, i0: float) -> FloatArray:  # noqa: E741
-    return ms + (m2 - ms) / (1.0 + i0 / I)
+#: a fitter of one form: (I, y, y_se, I_se) -> its FitResult
+Fitter = Callable[[FloatArray, FloatArray, FloatArray, FloatArray], FitResult]
 
 
-def _jop_linear(I: FloatArray, ms: float, m2: float, i0: float,  # noqa: E741
-                c: float) -> FloatArray:
-    return _jop(I, ms, m2, i0) + c * I
+def _forms() -> dict[str, tuple[tuple[str, int, Fitter], ...]]:
+    """The candidate forms per quantity, (name, constants, fitter): the first of each is the
+    form the models use (:func:`calibrate`), the second the same form less its fourth
+    constant."""
+    from granflow.analysis.rheology import JOP_LINEAR, PHI_QUADRATIC, fit_four, fit_jop, fit_law
+
+    return {
+        "mu_g": (("Jop + c I", 4, lambda i, y, e, s: fit_four(JOP_LINEAR, i, y, e, I_se=s)),
+                 ("Jop (mu_s, mu_2, I_0)", 3, lambda i, y, e, s: fit_jop(i, y, e, I_se=s))),
+        "phi": (("(4.7) - B I^2", 4,
+                 lambda i, y, e, s: fit_four(PHI_QUADRATIC, i, y, e, I_se=s)),
+                ("(4.7) phi_0 - A4 I^a4", 3, lambda i, y, e, s: fit_law("phi", i, y, e, I_se=s))),
+    }
 
 
-def _phi47(I: FloatArray, p0: float, a: float, e: float) -> FloatArray:  # noqa: E741
-    return p0 - a * I**e
+#: the candidate forms' names per quantity, the models' first (:func:`_forms`)
+FORMS = {q: tuple(name for name, _k, _f in c) for q, c in _forms().items()}
 
 
-def _phi47_quadratic(I: FloatArray, p0: float, a: float, e: float,  # noqa: E741
-                     b: float) -> FloatArray:
-    return _phi47(I, p0, a, e) - b * I**2
-
-
-#: the candidate forms per quantity: (name, function, first guess); the first of each is the
-#: form the models use (Jop et al.'s mu, 002's (4.7) phi)
-FORMS = {
-    "mu_g": (("Jop (mu_s, mu_2, I_0)", _jop, (0.36, 0.8, 0.5)),
-             ("Jop + c I", _jop_linear, (0.36, 0.8, 0.5, 0.0))),
-    "phi": (("(4.7) phi_0 - A4 I^a4", _phi47, (0.59, 0.16, 1.0)),
-            ("(4.7) - B I^2", _phi47_quadratic, (0.59, 0.16, 1.0, 0.0))),
-}
-
-
-def _fit_form(f: Any, guess: tuple[float, ...], I: FloatArray, y: FloatArray,  # noqa: E741
-              y_se: FloatArray, I_se: FloatArray) -> tuple[FloatArray, FloatArray] | None:
-    """Weighted least squares with the SE of I propagated by effective variance (sigma^2 =
-    y_se^2 + (f'(I) I_se)^2, refitted twice, as analysis.rheology.fit_law); the parameters
-    and each point's z, or None where the fit fails."""
-    from scipy.optimize import curve_fit
-
-    sig, pp = y_se, np.asarray(guess, dtype=np.float64)
-    try:
-        for _ in range(3):
-            pp, _cov = curve_fit(f, I, y, p0=pp, sigma=sig, absolute_sigma=True,
-                                 maxfev=50_000)
-            h = 1e-6 * I
-            slope = (f(I + h, *pp) - f(I - h, *pp)) / (2 * h)
-            sig = np.hypot(y_se, slope * I_se)
-    except (RuntimeError, ValueError):
-        return None
-    return pp, (y - f(I, *pp)) / sig
+def _z(fit: FitResult, I: FloatArray, y: FloatArray, y_se: FloatArray,  # noqa: E741
+       I_se: FloatArray) -> FloatArray:
+    """Each point's residual over its effective SE (y_se and the fit's slope times I_se)."""
+    h = 1e-6 * I
+    slope = (fit(I + h) - fit(I - h)) / (2 * h)
+    return np.asarray((y - fit(I)) / np.hypot(y_se, slope * I_se))
 
 
 def form_comparison(points: pl.DataFrame, i_max: float = FORM_I_MAX) -> pl.DataFrame:
     """Which form fits the pooled calibration points (:func:`pooled_points`), per pressure
     and quantity: each candidate of :data:`FORMS` fitted over all points and over those with
-    I_g <= ``i_max`` (the channel's range), with its reduced chi^2, largest |z| and the z of
-    the slowest point (a form that misses at low I shows there first). Points with a
-    non-positive SE are left out; a fit with no degree of freedom left is not made."""
+    I_g <= ``i_max`` (the channel's range), with its reduced chi^2 (over the effective SEs),
+    largest |z|, the z of the slowest point (a form that misses at low I shows there first)
+    and its low-I constant (mu_s or phi_0) with its SE. Points with a non-positive SE are
+    left out; a fit with no degree of freedom left is not made."""
     pooled = pooled_points(points)
+    forms = _forms()
     rows = []
     for p in sorted(set(pooled["p_ext"].to_list())):
         d = pooled.filter(pl.col("p_ext") == p).sort("I_g")
         ig, ig_se = d["I_g"].to_numpy(), d["I_g_se"].fill_nan(0.0).to_numpy()
-        for col, forms in FORMS.items():
+        for col, candidates in forms.items():
             y, se = d[col].to_numpy(), d[f"{col}_se"].to_numpy()
             good = np.isfinite(y) & np.isfinite(se) & (se > 0) & (ig > 0)
             for span, keep in (("all", good), (f"I_g <= {i_max:g}", good & (ig <= i_max))):
-                for name, f, guess in forms:
-                    n, k = int(keep.sum()), len(guess)
-                    fit = _fit_form(f, guess, ig[keep], y[keep], se[keep],
-                                    ig_se[keep]) if n > k else None
+                for name, k, fitter in candidates:
+                    n = int(keep.sum())
+                    fit = fitter(ig[keep], y[keep], se[keep], ig_se[keep]) if n > k else None
                     row = {"p_ext": float(p), "quantity": col, "form": name, "range": span,
                            "n": n, "constants": k, "red_chi2": math.nan,
                            "max_abs_z": math.nan, "z_slowest": math.nan,
-                           "I_g_slowest": float(ig[keep][0]) if n else math.nan}
-                    if fit is not None:
-                        _pp, z = fit
+                           "I_g_slowest": float(ig[keep][0]) if n else math.nan,
+                           "low_I": math.nan, "low_I_se": math.nan}
+                    if fit is not None and fit.success:
+                        z = _z(fit, ig[keep], y[keep], se[keep], ig_se[keep])
+                        first = next(iter(fit.params))
                         row.update(red_chi2=float((z**2).sum() / (n - k)),
-                                   max_abs_z=float(np.abs(z).max()), z_slowest=float(z[0]))
+                                   max_abs_z=float(np.abs(z).max()), z_slowest=float(z[0]),
+                                   low_I=fit.params[first],
+                                   low_I_se=fit.errors_scaled[first])
                     rows.append(row)
     return pl.DataFrame(rows)

@@ -33,6 +33,15 @@ def nearest_pressure(pressures: Iterable[float], pressure: float) -> float:
     return min(pressures, key=lambda q: abs(math.log(q / pressure)))
 
 
+def _square(values: list[float]) -> FloatArray:
+    """A covariance written row-major (3x3 or 4x4) as its matrix."""
+    v = np.asarray(values, dtype=np.float64)
+    k = math.isqrt(v.size)
+    if k * k != v.size:
+        raise bad("covariance", values, "k*k row-major values (a 3x3 or 4x4 covariance)")
+    return np.reshape(v, (k, k))
+
+
 @dataclass(frozen=True)
 class ModelConstants:
     """One set of model constants.
@@ -81,7 +90,7 @@ class ModelConstants:
         return ModelConstants(self.laws, A, A_se, A_from, self.covariances)
 
     def to_table(self) -> pl.DataFrame:
-        """One row per pressure: the law's fields, the covariances (row-major, 9 values each)
+        """One row per pressure: the law's fields, the covariances (row-major, 9 or 16 values)
         and the amplitude (the same in every row)."""
         rows = []
         for p, law in sorted(self.laws.items()):
@@ -124,13 +133,13 @@ class ModelConstants:
                                  "table (allowed a file written by ModelConstants.save; the "
                                  "cell fits of fits.parquet are not one)")
         t = pl.read_parquet(f)
-        fields = [k for k in LocalLaw.__dataclass_fields__]
+        # (a table from before the fourth constants has no c_mu, B_phi: they take 0)
+        fields = [k for k in LocalLaw.__dataclass_fields__ if k in t.columns]
         laws, covs = {}, {}
         for r in t.iter_rows(named=True):
             p = float(r["p_ext"])
             laws[p] = LocalLaw(**{k: r[k] for k in fields})
             if r["mu_cov"] is not None and r["phi_cov"] is not None:
-                covs[p] = (np.reshape(np.asarray(r["mu_cov"], dtype=np.float64), (3, 3)),
-                           np.reshape(np.asarray(r["phi_cov"], dtype=np.float64), (3, 3)))
+                covs[p] = (_square(r["mu_cov"]), _square(r["phi_cov"]))
         first = t.row(0, named=True)
         return cls(laws, float(first["A"]), float(first["A_se"]), str(first["A_from"]), covs)

@@ -68,7 +68,7 @@ class _Nonlocal:
         # dphi/dI, 0 where phi(I) is clipped; I bounded away from 0 where a_phi < 1
         inside = (i > 0) & (i < law.I_max)
         i_safe = np.clip(i, 1e-12 * law.I_max, law.I_max)
-        dphi = np.where(inside, -law.A_phi * law.a_phi * i_safe ** (law.a_phi - 1.0), 0.0)
+        dphi = np.where(inside, law.dphi_dI(i_safe), 0.0)
         gl = self.g_loc(mu)
         # |mu - mu_s| d g_loc/dmu, written without the (mu - mu_s)^(1/a_mu - 1) singularity
         i_loc = law.I_of_mu(mu)

@@ -45,7 +45,7 @@ from granflow.continuum.verdict import (
     zone_errors,
 )
 
-from ._campaign import core_seconds, md_table, pm_column, span_of
+from ._campaign import core_seconds, md_table, pm, pm_column, span_of
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import is_current, with_defaults
 from .cross_scene_report_bulk import bulk_lines
@@ -237,9 +237,10 @@ def dem_phi_lines(pred: Prediction) -> list[str]:
             "modelled; boundary data at the wall bin); A fitted so on the reference run "
             f"({a_ref:.3g}) and held, or each run's own:", "",
             md_table(tab), "",
-            f"Whole-channel velocity misfits, {words}. If the models' phi (0.590 in the plug, "
-            "where the DEM packs 0.62-0.65) were what made A vary with W and phi_bar, the "
-            "DEM's phi would gather the runs' own amplitudes: "
+            f"Whole-channel velocity misfits, {words}. If the models' phi ("
+            + ", ".join(f"{c.law.phi_0:.3f}" for c in pred.cal.values())
+            + " in the plug, where the DEM packs 0.62-0.65) were what made A vary with W and "
+            "phi_bar, the DEM's phi would gather the runs' own amplitudes: "
             + ("**it does not** (the spread hardly narrows): the amplitude's trend is the "
                "flow rule's, not the models' packing." if narrowing > GATHERED else
                f"**it narrows their spread** to {narrowing:.2f} of the model's: part of the "
@@ -490,14 +491,15 @@ def write_report(out: Path, path: Path, plan: Any, channel: str = "docs/data/rep
         "between-replica SE (their spread over sqrt(replicas), times the Student factor "
         "for few replicas; none for one replica), both shown as (within / between):", "",
         md_table(_points_table(pooled), {"p_ext": ".0e"}), "",
-        "Fits: mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) (Jop, Forterre & Pouliquen 2006; "
-        "row 'mu', the law the models use: c0 = mu_s, c1 = mu_2, c2 = I_0) and phi = phi_0 - "
-        "A4 I^a4 (002 (4.7); row 'phi', c0-c2 = phi_0, A4, a4); 002's mu1 = mu1_0 + A1 "
-        "I^a1 (4.2) beside them for "
-        "comparison (row 'mu (4.2)'), which fits these points worse and, with a1 < 1, "
-        "continues to a yield ratio below the ratios at which the cell arrests. The SE of I "
-        "is propagated; errors scaled by sqrt(chi2/dof) where that exceeds 1 "
-        "(`fits.parquet` keeps the covariance):", "",
+        "Fits, the laws the models use: mu = mu_s + (mu_2 - mu_s)/(1 + I_0/I) + c I (Jop, "
+        "Forterre & Pouliquen 2006, with a linear term; row 'mu': c0-c3 = mu_s, mu_2, I_0, "
+        "c) and phi = phi_0 - A4 I^a4 - B I^2 (002 (4.7) with a quadratic term; row 'phi': "
+        "c0-c3 = phi_0, A4, a4, B); why four constants, below ('Which form fits'). Beside "
+        "them for comparison the three-constant forms, Jop's (row 'mu (Jop)'), (4.7) (row "
+        "'phi (4.7)') and 002's mu1 = mu1_0 + A1 I^a1 (4.2) (row 'mu (4.2)'), which fits "
+        "these points worse and, with a1 < 1, continues to a yield ratio below the ratios at "
+        "which the cell arrests. The SE of I is propagated; errors scaled by sqrt(chi2/dof) "
+        "where that exceeds 1 (`fits.parquet` keeps the covariance):", "",
         md_table(fits.drop("cov", "equation"), {"p_ext": ".0e"}), "",
         range_sentence(pred.cal) + " " + _near_yield(points, lo), "",
         *continuation_lines(continuation_check(points)),
@@ -608,6 +610,12 @@ def continuation_lines(check: pl.DataFrame) -> list[str]:
     if check.is_empty():
         return []
     far = check.filter(pl.col("z").abs() > 2.0)
+    overlap = check.filter(pl.col("where") == "overlap")
+    pooled = ("" if overlap.is_empty() else
+              f" In the overlap the two drives agree, |z| <= "
+              f"{float(overlap['z'].abs().to_numpy().max()):.1f} over {overlap.height} "
+              "comparisons, so their points are pooled into one law; below it the rows test a "
+              "stress-only law's extrapolation, which the rate points replace.")
     verdict = ("every one within 2 combined SEs" if far.is_empty() else
                f"{far.height} of {check.height} beyond 2 combined SEs: " + "; ".join(
                    f"{r['quantity']} at I_g = {r['I_g']:.3g}, p d/kn = {r['p_ext']:g} "
@@ -625,7 +633,7 @@ def continuation_lines(check: pl.DataFrame) -> list[str]:
             "range, where the two drives must agree for the points to be pooled into one "
             "law; 'continuation': below it, where the models used the stress law's "
             "continuation before there were rate points "
-            f"(`granflow.continuum.calibration.continuation_check`). {verdict}:", "",
+            f"(`granflow.continuum.calibration.continuation_check`). {verdict}.{pooled}", "",
             md_table(shown, {"p_ext": ".0e", "I (imposed)": ".0e"}), ""]
 
 
@@ -635,7 +643,8 @@ def form_lines(forms: pl.DataFrame) -> list[str]:
     if forms.is_empty():
         return []
     fit = forms.filter(pl.col("red_chi2") <= 2.0)
-    first = {q: f[0][0] for q, f in FORMS.items()}
+    models = {q: f[0] for q, f in FORMS.items()}
+    three = {q: f[1] for q, f in FORMS.items()}
 
     def fits(q: str, span: str) -> str:
         ok = fit.filter((pl.col("quantity") == q) & (pl.col("range") == span))
@@ -645,30 +654,44 @@ def form_lines(forms: pl.DataFrame) -> list[str]:
         return ", ".join(names) if names else "none of them"
 
     spans = list(dict.fromkeys(forms["range"].to_list()))
-    own_all = forms.filter(pl.col("form").is_in(list(first.values()))
-                           & (pl.col("range") == "all"))
+    three_all = forms.filter(pl.col("form").is_in(list(three.values()))
+                             & (pl.col("range") == "all"))
 
     def slowest(q: str) -> float:
-        z = own_all.filter(pl.col("quantity") == q)["z_slowest"].abs()
+        z = three_all.filter(pl.col("quantity") == q)["z_slowest"].abs()
         return float(z.to_numpy().max()) if z.len() else math.nan
+
+    def low(q: str, form: str, span: str) -> str:
+        r = forms.filter((pl.col("quantity") == q) & (pl.col("form") == form)
+                         & (pl.col("range") == span)).sort("p_ext")
+        return ", ".join(pm(v, e, 4) for v, e in zip(r["low_I"], r["low_I_se"], strict=True))
 
     worst, worst_mu = slowest("phi"), slowest("mu_g")
     words = "; ".join(f"{q} over {s}: {fits(q, s)}" for q in FORMS for s in spans)
+    agree = "; ".join(
+        f"{name} {low(q, models[q], 'all')} ({models[q]}, all points) against "
+        f"{low(q, three[q], spans[-1])} ({three[q]}, {spans[-1]}) and "
+        f"{low(q, three[q], 'all')} ({three[q]}, all points)"
+        for q, name in (("mu_g", "mu_s"), ("phi", "phi_0")))
     shown = forms.select("p_ext", "quantity", "form", "range", "n", "constants",
                          pl.col("red_chi2").round(2), pl.col("max_abs_z").round(1),
                          pl.col("I_g_slowest").round_sig_figs(2),
-                         pl.col("z_slowest").round(1))
-    return ["**Which form fits.** The pooled points (both drives) fitted with the models' "
-            f"forms ({first['mu_g']}; {first['phi']}) and with one more constant each, over "
-            f"all points and over I_g <= {FORM_I_MAX:g} (the channel's dense zone, I_g up to "
+                         pl.col("z_slowest").round(1),
+                         pm_column("low_I", "low_I_se", "mu_s or phi_0"))
+    return ["**Which form fits, and why the models take four constants.** The pooled points "
+            f"(both drives) fitted with the models' forms ({models['mu_g']}; "
+            f"{models['phi']}) and with the same forms less their fourth constant, over all "
+            f"points and over I_g <= {FORM_I_MAX:g} (the channel's dense zone, I_g up to "
             "~0.08, with room); effective variance for the SE of I "
             "(`granflow.continuum.calibration.form_comparison`). Within the SEs (red chi2 "
-            f"<= 2 at every pressure): {words}. The models' forms over all points: the "
-            f"slowest point's |z| up to {worst:.1f} (phi) and {worst_mu:.1f} (mu_g): one "
-            "power of I cannot follow both the low-I dilatancy and the fast points' "
-            "curvature, so the rate points' offsets from the stress law's continuation "
-            "above are, where they exceed 2 SEs, the form's and not the drive's (compare the "
-            "'overlap' rows).", "",
+            f"<= 2 at every pressure): {words}. The three-constant forms over all points "
+            f"miss the slowest point by |z| up to {worst:.1f} (phi) and {worst_mu:.1f} "
+            "(mu_g): with three constants one curve cannot follow both the low-I dilatancy and "
+            "the fast points' curvature (I_g to ~0.8), and the fast points, many and precise, "
+            "pull the low-I constants. The fourth constant takes up that curvature, and the "
+            "low-I constants then move to those of the three-constant forms fitted over the "
+            f"channel's range alone (per pressure, ascending): {agree}. So one mu(I) and one "
+            "phi(I) hold over the whole calibrated range with four constants each.", "",
             md_table(shown, {"p_ext": ".0e"}), ""]
 
 
