@@ -695,8 +695,9 @@ def form_lines(forms: pl.DataFrame) -> list[str]:
             md_table(shown, {"p_ext": ".0e"}), ""]
 
 
-#: the slowest shear in the channel's dense zone (I = 1e-4 to 0.04, docs/cross_scene.md)
-CHANNEL_I_MIN = 1e-4
+#: the slowest and fastest shear in the channel's dense zone (I = 1e-4 to 0.04,
+#: docs/cross_scene.md)
+CHANNEL_I_MIN, CHANNEL_I_MAX = 1e-4, 0.04
 
 
 def short_of_channel(cal: Mapping[float, Any]) -> list[float]:
@@ -710,10 +711,15 @@ def range_sentence(cal: Mapping[float, Any]) -> str:
     ranges = "; ".join(f"I = {c.law.I_min:.3g} to {c.law.I_max:.3g} at p d/kn = {p:g}"
                        for p, c in sorted(cal.items()))
     short = short_of_channel(cal)
-    tail = (" The channel's dense zone shears at I = 1e-4 to 0.04: at p d/kn = "
-            + ", ".join(f"{p:g}" for p in short) + " mostly below the calibrated range, "
-            "where both models use the fitted law's continuation to its yield ratio mu_s, a "
-            "fit parameter, not a measurement." if short else
+    def below(p: float) -> str:
+        frac = math.log(cal[p].law.I_min / CHANNEL_I_MIN) / math.log(CHANNEL_I_MAX
+                                                                    / CHANNEL_I_MIN)
+        return f"{min(frac, 1.0):.0%} of its decades at p d/kn = {p:g}"
+
+    tail = (" The channel's dense zone shears at I = 1e-4 to 0.04; below the calibrated "
+            "range lie " + ", ".join(below(p) for p in short) + ": there both models use "
+            "the fitted law's continuation to its yield ratio mu_s, a fit parameter, not a "
+            "measurement." if short else
             " That covers the channel's dense zone, I = 1e-4 to 0.04: the models' mu(I) "
             "there is measured, not a continuation.")
     return f"**The calibrated range is {ranges}.**" + tail
