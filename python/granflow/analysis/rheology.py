@@ -665,6 +665,17 @@ def fit_law(
     )
 
 
+def _usable(I: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike,  # noqa: E741
+            I_se: npt.ArrayLike | None) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The points a fit of Jop's form (or a four-constant form) uses: finite, SE > 0, I > 0;
+    ``I_se`` 0 where not given."""
+    ii, yy, sy = (np.asarray(v, dtype=np.float64) for v in (I, y, y_se))
+    si = np.zeros_like(ii) if I_se is None else np.asarray(I_se, dtype=np.float64)
+    ok = np.isfinite(ii) & np.isfinite(yy) & np.isfinite(sy) & (sy > 0) & (ii > 0)
+    ok &= np.isfinite(si)
+    return ii[ok], yy[ok], sy[ok], si[ok]
+
+
 #: the mu(I) form of Jop, Forterre & Pouliquen (Nature 2006), mu = mu_s + (mu_2 - mu_s)/(1 +
 #: I_0/I): linear in I at small I, where (4.2) with a1 < 1 has an infinite slope and so
 #: continues to a lower yield ratio; the form continuum models of granular flow take
@@ -685,11 +696,7 @@ def fit_jop(I: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike,  # noqa: E7
     propagated by effective variance as in :func:`fit_law`. Only I_0 > 0 is bounded: a fit
     that ends with mu_2 <= mu_s is returned as it is (granflow.continuum.LocalLaw refuses
     it by name)."""
-    ii, yy, sy = (np.asarray(v, dtype=np.float64) for v in (I, y, y_se))
-    si = np.zeros_like(ii) if I_se is None else np.asarray(I_se, dtype=np.float64)
-    ok = np.isfinite(ii) & np.isfinite(yy) & np.isfinite(sy) & (sy > 0) & (ii > 0)
-    ok &= np.isfinite(si)
-    ii, yy, sy, si = ii[ok], yy[ok], sy[ok], si[ok]
+    ii, yy, sy, si = _usable(I, y, y_se, I_se)
     names = ("mu_s", "mu_2", "I_0")
     n = int(ii.size)
     nan3 = dict.fromkeys(names, math.nan)
@@ -767,11 +774,7 @@ def fit_four(law: str, I: npt.ArrayLike, y: npt.ArrayLike,  # noqa: E741
     if law not in FOUR_CONSTANT:
         raise ParameterError(f"invalid law = {law!r}: allowed one of {sorted(FOUR_CONSTANT)}")
     form = FOUR_CONSTANT[law]
-    ii, yy, sy = (np.asarray(v, dtype=np.float64) for v in (I, y, y_se))
-    si = np.zeros_like(ii) if I_se is None else np.asarray(I_se, dtype=np.float64)
-    ok = np.isfinite(ii) & np.isfinite(yy) & np.isfinite(sy) & (sy > 0) & (ii > 0)
-    ok &= np.isfinite(si)
-    ii, yy, sy, si = ii[ok], yy[ok], sy[ok], si[ok]
+    ii, yy, sy, si = _usable(I, y, y_se, I_se)
     n = int(ii.size)
     nan4 = dict.fromkeys(form.names, math.nan)
 

@@ -13,7 +13,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
-from granflow.analysis.rheology import FitResult
+from granflow.analysis.rheology import (
+    JOP_LINEAR,
+    PHI_QUADRATIC,
+    FitResult,
+    fit_four,
+    fit_jop,
+    fit_law,
+)
 from granflow.analysis.tables import FloatArray
 from granflow.continuum.laws import LocalLaw
 from granflow.errors import ParameterError
@@ -81,8 +88,6 @@ def calibrate(points: pl.DataFrame) -> dict[float, Calibration]:
     with a1 < 1 continues to a yield ratio below the ratios at which the cell arrests; the
     three-constant fits are kept beside (``compared``). Raises ParameterError when a pressure
     has fewer than 5 steady points."""
-    from granflow.analysis.rheology import JOP_LINEAR, PHI_QUADRATIC, fit_four, fit_jop, fit_law
-
     out: dict[float, Calibration] = {}
     pooled = pooled_points(points)
     for p in sorted(set(pooled["p_ext"].to_list())):
@@ -187,8 +192,6 @@ def _forms() -> dict[str, tuple[tuple[str, int, Fitter], ...]]:
     """The candidate forms per quantity, (name, constants, fitter): the first of each is the
     form the models use (:func:`calibrate`), the second the same form less its fourth
     constant."""
-    from granflow.analysis.rheology import JOP_LINEAR, PHI_QUADRATIC, fit_four, fit_jop, fit_law
-
     return {
         "mu_g": (("Jop + c I", 4, lambda i, y, e, s: fit_four(JOP_LINEAR, i, y, e, I_se=s)),
                  ("Jop (mu_s, mu_2, I_0)", 3, lambda i, y, e, s: fit_jop(i, y, e, I_se=s))),

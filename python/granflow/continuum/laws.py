@@ -4,7 +4,6 @@ uncertainty."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
@@ -84,7 +83,7 @@ class LocalLaw:
             raise bad("I_max", self.I_max, f"> I_min = {self.I_min!r}")
         if self.c_mu != 0 and self.mu_form != "jop":
             raise bad("c_mu", self.c_mu, "0 unless mu_form = 'jop'")
-        if self._slope(self.I_max) <= 0:
+        if self.mu_form == "jop" and self._jop_slope(self.I_max) <= 0:
             least = -self.A_mu * self.a_mu / (self.I_max + self.a_mu) ** 2
             raise bad("c_mu", self.c_mu,
                       f"> {least:.6g} (mu(I) rising up to I_max = {self.I_max:g})")
@@ -93,12 +92,9 @@ class LocalLaw:
             raise bad("B_phi", self.B_phi,
                       f"> {least:.6g} (phi(I) falling up to I_max = {self.I_max:g})")
 
-    def _slope(self, i: float) -> float:
-        """dmu/dI of Jop's form with its linear term at ``i`` (inf for the power form, which
-        rises everywhere)."""
-        if self.mu_form != "jop":
-            return math.inf
-        return self.A_mu * self.a_mu / (i + self.a_mu) ** 2 + self.c_mu
+    def _jop_slope(self, i: npt.ArrayLike) -> FloatArray:
+        """dmu/dI of Jop's form with its linear term at ``i``."""
+        return np.asarray(self.A_mu * self.a_mu / (np.asarray(i) + self.a_mu) ** 2 + self.c_mu)
 
     def mu(self, I: npt.ArrayLike) -> FloatArray:  # noqa: E741 (the paper's symbol)
         """Stress ratio ``mu_s + A_mu I^a_mu`` (002 (4.2)), or ``mu_s + A_mu I/(I + a_mu) +
@@ -160,8 +156,8 @@ class LocalLaw:
         i = self.I_of_mu(mu)
         if self.mu_form == "jop" and self.c_mu != 0:
             excess = np.maximum(np.asarray(mu, dtype=np.float64) - self.mu_s, 0.0)
-            slope = self.A_mu * self.a_mu / (i + self.a_mu) ** 2 + self.c_mu
-            return np.asarray(excess / np.maximum(slope, 1e-12 * self.A_mu / self.a_mu))
+            return np.asarray(excess / np.maximum(self._jop_slope(i),
+                                                  1e-12 * self.A_mu / self.a_mu))
         if self.mu_form == "jop":
             excess = np.maximum(np.asarray(mu, dtype=np.float64) - self.mu_s, 0.0)
             return np.asarray(i * self.A_mu / np.maximum(self.A_mu - excess, 1e-12 * self.A_mu))
