@@ -550,12 +550,13 @@ def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:
 # --------------------------------------------------------------------------------------------
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None, log: Any = print,
-                 threads: int | None = None) -> pl.DataFrame:
+                 threads: int | None = None, whole: Plan | None = None) -> pl.DataFrame:
     """Run the points of ``plan`` not yet in ``out/points.parquet`` (with the branches whose
     parents are done, first), then the other branches (their parents are done by then), then
-    its later points; each finished point is appended there as it completes."""
+    its later points; each finished point is appended there as it completes. ``whole``: the
+    plan ``plan`` is a piece of (``--select``), whose branches keep their parents' copies."""
     kw: dict[str, Any] = {"workers": workers, "scheduler": scheduler, "threads": threads,
-                          "log": log}
+                          "log": log, "whole": whole}
     if (n := add_final_rows(STUDY, Point, plan, out)):
         log(f"{plan.name}: the order across the channel measured on {n} finished points' last "
             "states")

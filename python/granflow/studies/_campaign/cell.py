@@ -381,11 +381,12 @@ STUDY = CellStudy()
 def run_campaign(plan: Plan, out: str | os.PathLike[str], workers: int | None = None,
                  scheduler: str | None = None,
                  log: Callable[[str], Any] = print,
-                 threads: int | None = None) -> pl.DataFrame:
+                 threads: int | None = None, whole: Plan | None = None) -> pl.DataFrame:
     """Run the points of ``plan`` not yet in ``out/points.parquet``; each finished point is
-    appended there as it completes (local process pool by default, or a Dask scheduler)."""
+    appended there as it completes (local process pool by default, or a Dask scheduler).
+    ``whole``: the plan ``plan`` is a piece of (``--select``)."""
     return run_points(STUDY, plan.points, plan, out, workers=workers, scheduler=scheduler,
-                      threads=threads, log=log, name=plan.name)
+                      threads=threads, log=log, name=plan.name, whole=whole)
 
 
 def reanalyse(out: str | os.PathLike[str], plan: Plan) -> int:

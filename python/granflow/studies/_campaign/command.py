@@ -63,7 +63,8 @@ def cli(argv: Iterable[str] | None, *, module: str, description: str,
     if a.reanalyse:
         print(f"reanalysed: {reanalyse(out, plan)} points to go on with")
     if not a.only_report:
-        run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler, threads=a.threads)
+        run_campaign(plan, out, workers=a.workers, scheduler=a.scheduler, threads=a.threads,
+                     whole=whole)
     from .engine import dataset_lock
 
     # (the report is of the whole plan: what is left of it, its cost, whatever was selected;
@@ -104,7 +105,7 @@ def select(plan: Any, pattern: str) -> Any:
 
     from granflow.errors import ParameterError
 
-    from .engine import part_of, point_fields
+    from .engine import point_fields
 
     try:
         rx = re.compile(pattern)
@@ -117,4 +118,4 @@ def select(plan: Any, pattern: str) -> Any:
         raise ParameterError(f"invalid select = {pattern!r}: allowed a pattern matching at "
                              f"least one point key of the {plan.name} plan (e.g. "
                              f"{next(iter(plan.points)).key!r})")
-    return part_of(dataclasses.replace(plan, **kept), plan)
+    return dataclasses.replace(plan, **kept)

@@ -447,30 +447,19 @@ def _context(info: Mapping[str, Any], d: Path) -> dict[str, Any]:
     return dict(json.loads(header or "{}"))
 
 
-def part_of(part: Any, whole: Any) -> Any:
-    """``part`` (a plan with some of ``whole``'s points: ``--select``) remembering ``whole``,
-    so that a finished point's kept copy stays while a point of the whole plan starts from it
-    (:meth:`Study.dependents`), selected or not."""
-    object.__setattr__(part, "_whole_plan", whole_plan(whole))
-    return part
-
-
-def whole_plan(plan: Any) -> Any:
-    """The plan ``plan`` is a part of (:func:`part_of`), else ``plan`` itself."""
-    return getattr(plan, "_whole_plan", plan)
-
-
 def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.PathLike[str], *,
                workers: int | None = None, scheduler: str | None = None,
                threads: int | None = None, log: Callable[[str], Any] = print,
-               name: str = "campaign") -> pl.DataFrame:
+               name: str = "campaign", whole: Any = None) -> pl.DataFrame:
     """Run (:func:`run_point`) the ``points`` not yet done in ``out/points.parquet`` (local
     process pool by default, or a Dask scheduler): those it lacks, and those whose row is not
     :func:`is_current` (the new row replaces the old, in every table); each finished row is
     appended there at once, and the
     list of rows under each key ``k`` of ``study.tables`` to ``out/<study.tables[k]>.parquet``.
     ``threads`` per point (default cores/workers; :func:`granflow.study.map_tasks`).
-    Returns the whole points table."""
+    ``whole``: the plan that ``plan`` is a piece of (``--select``; default ``plan``), whose
+    points keep a finished point's copy while they start from it (:meth:`Study.dependents`),
+    selected or not. Returns the whole points table."""
     from granflow.study import map_tasks
 
     outp = Path(out)
@@ -492,7 +481,7 @@ def run_points(study: Study, points: Sequence[Any], plan: Any, out: str | os.Pat
         if key not in finished:
             return
         kept = kept_dir(outp / "work", key)
-        if all(k in finished for k in study.dependents(key, whole_plan(plan))):
+        if all(k in finished for k in study.dependents(key, plan if whole is None else whole)):
             progress.forget(kept)
             return
         if not kept.exists():
