@@ -176,7 +176,7 @@ def test_the_widths_campaign_runs_the_widest_first_rained_and_000s_2000_plus_600
     from granflow.studies.reproduce_000_report import stop_rule
 
     text = stop_rule(plan)
-    assert "from t = 2000" in text and "reaches t = 3200" in text
+    assert "from t = 2000" in text and "reaches t = 3600" in text
     assert "every run that flows is 2600 long" in stop_rule(rp.paper_plan())
     assert "MSER start" in stop_rule(rp.full_plan())
 
@@ -559,11 +559,11 @@ def test_the_pour_plans_runs_left_name_the_campaign_that_carries_it_on(tmp_path)
 def test_the_runs_left_say_where_the_cap_cannot_hold_the_rules_correlation_times():
     from granflow.studies.reproduce_000_report_cost import tau_floor
 
-    plan = rp.widths_plan()  # t = 2000-3200: 1200 of averaging, 20 correlation times
+    plan = rp.widths_plan()  # t = 2000-3600: 1600 of averaging, 20 correlation times
     pts = pl.DataFrame({"W": [20.0, 20.0, 100.0], "parent": ["", "", ""],
                         "tau_max": [7.0, 13.0, 589.0]})
     text = "\n".join(tau_floor(pts, plan))
-    assert "at most 1200 time units (t = 2000-3200)" in text
+    assert "at most 1600 time units (t = 2000-3600)" in text
     assert "W = 20: τ 7-13 (20 τ = 140-260, 2 runs); W = 100: τ 589 (20 τ = 11780, 1 run)" \
         in text
     assert "At W = 100 that is more than the cap allows" in text
@@ -722,6 +722,24 @@ def test_a_one_replica_point_takes_the_audits_shortfall_on_its_run_ses():
     assert point_values(bare, f).sort("W").row(1, named=True)["audit_scaled"] is False
     # without pairs (one replica everywhere) nothing is scaled
     assert audit_factors(coverage_table(points.filter(pl.col("seed") == 1))) == {}
+
+
+def test_runs_stopped_by_an_earlier_cap_are_named():
+    from granflow.studies.reproduce_000_report import _earlier_cap_line
+
+    plan = rp.widths_plan()
+    base = {"phi_bar": 0.6, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "", "seed": 1}
+    pts = pl.DataFrame([
+        {**base, "W": 60.0, "seed": 2, "state": "steady", "converged": False, "t_end": 3200.0},
+        {**base, "W": 100.0, "state": "drifting", "converged": False, "t_end": 3199.97},
+        {**base, "W": 60.0, "state": "steady", "converged": True, "t_end": 3100.0},
+        {**base, "W": 20.0, "state": "arrested", "converged": False, "t_end": 900.0},
+        {**base, "W": 150.0, "state": "steady", "converged": False,
+         "t_end": plan.t_max - 0.01}])
+    assert _earlier_cap_line(pts, plan) == (
+        " Ended at an earlier cap (t = 3200), unconverged, where the cap is now t = 3600: "
+        "W = 60, φ̄ = 0.6, seed 2 (steady); W = 100, φ̄ = 0.6, seed 1 (drifting).")
+    assert _earlier_cap_line(pts.filter(pl.col("converged")), plan) == ""
 
 
 def test_a_run_that_never_settles_is_named_with_its_trend():

@@ -29,6 +29,7 @@ from granflow.analysis.stats import MIN_SE_BLOCKS
 from granflow.states import FlowState
 
 from ._campaign import (
+    ERROR_STATES,
     md_table,
     plot_campaign_se,
     pm,
@@ -477,11 +478,29 @@ def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
                   f"({NED}).", ""]
     lines += ["States: " + ", ".join(f"{k} {v}" for k, v in sorted(
                   points["state"].value_counts().iter_rows())) + ". " + _drift_line(points)
+              + _earlier_cap_line(points, plan)
               + " `prep (s)` is the wall time of the fill and release, `wall (s)` all of the "
               "point's (both on one core shared with one other point).", "",
               md_table(_run_table(points), {"t_start": ".0f", "T_avg": ".0f", "t_run": ".0f",
                                             "prep (s)": ".1f", "wall (s)": ".0f"}), ""]
     return lines
+
+
+def _earlier_cap_line(points: pl.DataFrame, plan: Any) -> str:
+    """The runs that stopped, unconverged, more than a stint short of the plan's present cap:
+    run under an earlier, lower cap (their rows stay; their copies cannot go on), or ""."""
+    if not points.height or "converged" not in points.columns:
+        return ""
+    cap = pl.when(pl.col("parent") == "").then(plan.t_max).otherwise(plan.branch_t_max)
+    short = points.filter(~pl.col("converged") & ~pl.col("state").is_in(
+        [FlowState.ARRESTED.value, *ERROR_STATES]) & (pl.col("t_end") < cap - plan.stint))
+    if not short.height:
+        return ""
+    return (" Ended at an earlier cap (t = " + ", ".join(
+        f"{t:.0f}" for t in sorted({round(t, -1) for t in short["t_end"]})) + "), unconverged, "
+        f"where the cap is now t = {plan.t_max:g}: " + "; ".join(
+        f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}, seed {r['seed']} ({r['state']})"
+        for r in short.iter_rows(named=True)) + ".")
 
 
 def _drift_line(points: pl.DataFrame) -> str:
