@@ -160,7 +160,8 @@ def remaining(out: Path, plan: Any, default: float = UNMEASURED_RATE) -> list[st
             "on this 2-core machine"
             + (f"; of these, φ̄ = {head.phi_bar:g} at every width (B = {head.B:g}), which the "
                f"plan runs first, {first[0]} runs and at most {first[1]:.0f} core-hours "
-               f"({first[1] / 6:.0f} sessions)" if first[0] else "")
+               f"({first[1] / 6:.0f} session{'' if round(first[1] / 6) == 1 else 's'})"
+               if first[0] else "")
             + ". On a cluster each point is one task of one "
             f"thread (it checkpoints every stint and resumes from there); the longest takes "
             f"{longest:.0f} h on one core, so the jobs' walltime below:", "",
