@@ -33,6 +33,7 @@ from ._campaign import (
     md_table,
     plot_campaign_se,
     pm,
+    point_of,
 )
 from .reproduce_000_figures import (
     plot_fig4,
@@ -487,20 +488,22 @@ def _runs_section(points: pl.DataFrame, plan: Any) -> list[str]:
 
 
 def _earlier_cap_line(points: pl.DataFrame, plan: Any) -> str:
-    """The runs that stopped, unconverged, more than a stint short of the plan's present cap:
-    run under an earlier, lower cap (their rows stay; their copies cannot go on), or ""."""
-    if not points.height or "converged" not in points.columns:
+    """The runs that stopped, unconverged, more than a stint short of their present cap
+    (:meth:`Plan.limits`): run under an earlier, lower cap (their rows stay; their copies
+    cannot go on), or ""."""
+    if not points.height or "converged" not in points.columns or not plan.points:
         return ""
-    cap = pl.when(pl.col("parent") == "").then(plan.t_max).otherwise(plan.branch_t_max)
-    short = points.filter(~pl.col("converged") & ~pl.col("state").is_in(
-        [FlowState.ARRESTED.value, *ERROR_STATES]) & (pl.col("t_end") < cap - plan.stint))
-    if not short.height:
+    cls = type(plan.points[0])
+    short = [r for r in points.iter_rows(named=True)
+             if not r["converged"] and r["state"] not in (FlowState.ARRESTED.value, *ERROR_STATES)
+             and r["t_end"] < plan.limits(point_of(cls, r))[0] - plan.stint]
+    if not short:
         return ""
     return (" Ended at an earlier cap (t = " + ", ".join(
-        f"{t:.0f}" for t in sorted({round(t, -1) for t in short["t_end"]})) + "), unconverged, "
+        f"{t:.0f}" for t in sorted({round(r["t_end"], -1) for r in short})) + "), unconverged, "
         f"where the cap is now t = {plan.t_max:g}: " + "; ".join(
         f"W = {r['W']:g}, φ̄ = {r['phi_bar']:g}, seed {r['seed']} ({r['state']})"
-        for r in short.iter_rows(named=True)) + ".")
+        for r in short) + ".")
 
 
 def _drift_line(points: pl.DataFrame) -> str:
