@@ -579,3 +579,15 @@ def test_the_trend_sentence_leaves_out_a_trend_over_one_value():
     assert text.endswith("the z-values are 2.0")
     none = _trends_sentence(Trend("W", nan, nan, nan, 0.4, 0.01, 1.0), tp)
     assert none == "With one value of W and one of phi_bar the bulk amplitude has no trend to test"
+
+
+def test_the_points_table_writes_a_dash_where_one_replica_has_no_between_se():
+    cols = {"p_ext": [2e-4, 2e-4], "N": [2000, 2000], "inertial_number": [1e-4, 0.0],
+            "tau_ratio": [0.0, 0.41], "replicas": [1, 3], "sigma_g_p": [1.05, 1.05]}
+    for x in ("I_g", "mu_g", "phi"):
+        cols |= {x: [2e-4, 1e-3], f"{x}_se": [3.1e-7, 2e-5],
+                 f"{x}_se_within": [3.1e-7, 1e-5], f"{x}_se_between": [math.nan, 2e-5]}
+    tab = csr._points_table(pl.DataFrame(cols))
+    se = tab["I_g SE (within / between)"].to_list()
+    assert se == ["3.1e-7 (3.1e-7 / -)", "0.00002 (0.00001 / 0.00002)"], se
+    assert not any("NaN" in str(v) for row in tab.iter_rows() for v in row)
