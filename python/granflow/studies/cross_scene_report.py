@@ -45,7 +45,7 @@ from granflow.continuum.verdict import (
     zone_errors,
 )
 
-from ._campaign import core_seconds, md_table, pm, pm_column, span_of
+from ._campaign import core_seconds, md_table, pm, pm_column, sig_text, span_of
 from ._campaign.cell import STUDY, Point, channel_material
 from ._campaign.engine import is_current, with_defaults
 from .cross_scene_report_bulk import bulk_lines
@@ -734,14 +734,9 @@ def _points_table(pooled: pl.DataFrame) -> pl.DataFrame:
              .otherwise(pl.format("tau/p = {}", pl.col("tau_ratio").round(3))))
     cols: list[pl.Expr] = [pl.col("p_ext"), pl.col("N"), drive.alias("drive"),
                            pl.col("replicas")]
-    def se(c: str) -> pl.Expr:  # ('-' where there is none: one replica has no between SE)
-        v = pl.col(c)
-        return (pl.when(v.is_null() | v.is_nan()).then(pl.lit("-"))
-                .otherwise(v.round_sig_figs(2).cast(pl.String)))
-
-    for x in ("I_g", "mu_g", "phi"):
+    for x in ("I_g", "mu_g", "phi"):  # (one replica has no between SE: '-')
         cols += [pl.col(x).round_sig_figs(4),
-                 pl.format("{} ({} / {})", *(se(f"{x}_se{t}")
+                 pl.format("{} ({} / {})", *(sig_text(f"{x}_se{t}")
                                               for t in ("", "_within", "_between")))
                  .alias(f"{x} SE (within / between)")]
     return pooled.sort("p_ext", "N", "I_g").select(*cols, pl.col("sigma_g_p").round_sig_figs(4))

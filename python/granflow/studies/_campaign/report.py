@@ -56,6 +56,14 @@ def pm_column(value: str, se: str, name: str, digits: int = 4) -> pl.Expr:
                                              return_dtype=pl.String).alias(name)
 
 
+def sig_text(column: str, digits: int = 2) -> pl.Expr:
+    """``column`` as text rounded to ``digits`` significant figures, ``-`` where it is NaN or
+    null (as :func:`md_table` writes a float): for numbers formatted inside a text cell."""
+    v = pl.col(column)
+    return (pl.when(v.is_null() | v.is_nan()).then(pl.lit("-"))
+            .otherwise(v.round_sig_figs(digits).cast(pl.String)))
+
+
 def dask_recipe(module: str, out: str, walltime: str, mode: str = "paper") -> list[str]:
     """A report's lines on running a campaign (``--mode``, the paper-scale one by default)
     with Dask (markdown)."""
