@@ -296,6 +296,26 @@ def test_the_collapse_at_the_same_imposed_stress():
     assert "At the same imposed stress" in text and "apart are I at mu_s = 0.3" in text
 
 
+def test_the_size_effect_table_writes_a_dash_for_a_missing_se():
+    """The N = 10,000 point beside its N = 2000 state: value ± SE at fixed decimals and the
+    difference in combined SEs; a point without an SE shows its value alone and '-' for the
+    difference, never NaN; no N = 10,000 point, no section."""
+    from granflow.studies import reproduce_002_report as rep
+
+    def row(n: int, i: float, i_se: float) -> dict[str, float | int]:
+        return {"mu_s": 0.3, "p_ext": 1e-4, "tau_ratio": 0.5, "N": n, "I": i, "I_se": i_se,
+                "phi": 0.562, "phi_se": 0.0001}
+
+    assert rep.size_effect_lines(pl.from_dicts([row(2000, 0.13, 0.0006)]), 2000) == []
+    text = "\n".join(rep.size_effect_lines(
+        pl.from_dicts([row(2000, 0.1298, 0.0006), row(10_000, 0.1305, 0.0004)]), 2000))
+    assert "| 0.1298 ± 0.0006 | 0.1305 ± 0.0004 | 0.5620 ± 0.0001 |" in text
+    assert "| 1.0 | 0.0 |" in text  # (0.1305 - 0.1298) / sqrt(0.0006^2 + 0.0004^2)
+    text = "\n".join(rep.size_effect_lines(
+        pl.from_dicts([row(2000, 0.1298, 0.0006), row(10_000, 0.1305, float("nan"))]), 2000))
+    assert "| 0.1305 |" in text and "| - |" in text and "nan" not in text.lower()
+
+
 def test_the_shared_slow_mode_is_in_the_se():
     """x = large fast noise + a slow mode that the reference carries almost alone (I and phi
     in the cell): x's own blocking SE misses the slow share, the shared-mode SE has it."""

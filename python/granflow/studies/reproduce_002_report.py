@@ -832,6 +832,32 @@ def _pressures(pool: pl.DataFrame, n: int) -> str:
     return ", ".join(f"{p:.0e}" for p in ps)
 
 
+def size_effect_lines(pool: pl.DataFrame, n_main: int) -> list[str]:
+    """The N = 10,000 points beside the same states at ``n_main`` (markdown; none without
+    them): each quantity ± its SE and the difference in combined SEs (``-`` where an SE is
+    missing, never NaN)."""
+    big = pool.filter(pl.col("N") == 10_000)
+    if not big.height:
+        return []
+    both = big.join(pool.filter(pl.col("N") == n_main), on=["mu_s", "p_ext", "tau_ratio"],
+                    suffix="_small")
+
+    def z(col: str) -> pl.Expr:
+        return ((pl.col(col) - pl.col(f"{col}_small"))
+                / (pl.col(f"{col}_se") ** 2 + pl.col(f"{col}_se_small") ** 2).sqrt())
+
+    size = both.select(
+        "mu_s", "tau_ratio",
+        pm_column("I_small", "I_se_small", f"I (N={n_main})"),
+        pm_column("I", "I_se", "I (N=10000)"),
+        pm_column("phi_small", "phi_se_small", f"phi (N={n_main})"),
+        pm_column("phi", "phi_se", "phi (N=10000)"),
+        z("I").fill_null(float("nan")).alias("dI / error"),
+        z("phi").fill_null(float("nan")).alias("dphi / error"))
+    return [f"## Size effect (N = 10,000 against N = {n_main})", "",
+            md_table(size, {"dI / error": ".1f", "dphi / error": ".1f"}), ""]
+
+
 def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path:
     """Write the markdown report for the dataset in ``out`` (campaign ``plan``) to ``path``
     (figures beside it, in ``<path stem>_figures/``), with the cost of the ``paper`` points."""
@@ -909,27 +935,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Sequence[Any]) -> Path
               "exponent against mu_s (all pressures, errors scaled by sqrt(chi2/dof) where that "
               "exceeds 1; open: not determined) with 002's (§4) as squares.", ""]
     lines += [f"![{p.stem}]({p.relative_to(rel)})" for p in figs] + [""]
-    big = pool.filter(pl.col("N") == 10_000)
-    if big.height:
-        both = big.join(pool.filter(pl.col("N") == n_main), on=["mu_s", "p_ext", "tau_ratio"],
-                        suffix="_small")
-        size = both.select(
-            "mu_s", "tau_ratio",
-            pl.format("{} ± {}", pl.col("I_small").round(4), pl.col("I_se_small").round(4))
-            .alias(f"I (N={n_main})"),
-            pl.format("{} ± {}", pl.col("I").round(4), pl.col("I_se").round(4))
-            .alias("I (N=10000)"),
-            pl.format("{} ± {}", pl.col("phi_small").round(4), pl.col("phi_se_small").round(4))
-            .alias(f"phi (N={n_main})"),
-            pl.format("{} ± {}", pl.col("phi").round(4), pl.col("phi_se").round(4))
-            .alias("phi (N=10000)"),
-            ((pl.col("I") - pl.col("I_small"))
-             / (pl.col("I_se") ** 2 + pl.col("I_se_small") ** 2).sqrt()).alias("dI / error"),
-            ((pl.col("phi") - pl.col("phi_small"))
-             / (pl.col("phi_se") ** 2 + pl.col("phi_se_small") ** 2).sqrt())
-            .alias("dphi / error"))
-        lines += ["## Size effect (N = 10,000 against N = 2000)", "",
-                  md_table(size, {"dI / error": ".1f", "dphi / error": ".1f"}), ""]
+    lines += size_effect_lines(pool, n_main)
     gone = points.filter(pl.col("state").is_in(ERROR_STATES))
     if gone.height:
         lines += ["## Ratios without a steady state", "",
