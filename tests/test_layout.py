@@ -228,3 +228,13 @@ def test_studies_share_code_only_through_the_engine():
     }) == ["granflow.studies.cross_scene -> granflow.studies.reproduce_002",
            "granflow.studies.reproduce_002_report_x -> granflow.studies.cross_scene",
            "granflow.studies.stability -> granflow.studies.timestep"]
+
+
+def test_the_committed_reports_print_no_nan():
+    """A missing value is written '-' or left out (granflow.studies._campaign.report.pm),
+    never as NaN: a report cell with 'nan' is a formatting bug."""
+    docs = PKG.parents[1] / "docs"
+    bad = [f"{p.name}:{i}: {line.strip()[:120]}" for p in sorted(docs.glob("*.md"))
+           for i, line in enumerate(p.read_text().splitlines(), 1)
+           if re.search(r"(?<![\w.])nan(?![\w.])", line, re.I)]
+    assert not bad, "\n".join(bad)

@@ -265,7 +265,7 @@ def test_the_report_regenerates_from_a_tiny_dataset(rows, tmp_path):
     assert "| 40 | 0.6 |" not in text.split("## Fig. 5")[1].split("## The profile's shape")[0]
     # but its shape, stationary while its level grows, counts on its own correlation time
     shape = text.split("## The profile's shape")[1].split("## Figures")[0]
-    assert "| 40 | 0.6 | 1 | drifting |" in shape, shape
+    assert "| 40 | 0.6 | 1e+05 | 1 | drifting |" in shape, shape
     # the coverage audit: 3 replicas give 3 pairs, 2 degrees of freedom
     cov = text.split("## Coverage audit")[1]
     assert "| u_slip | 1 | 3 | 2 |" in cov and "No pairs" not in cov
@@ -396,6 +396,91 @@ def test_phi_ad_holds_only_at_000s_widths_and_where_the_fit_resolves_its_002():
     assert v == "cannot tell at this scale" and "W >= 60" in why
     # far off with a wide SE still does not hold
     assert verdict(loose(60.0, 0.02, phi_ad=0.62))[0] == "does not hold"
+
+
+def test_a_claim_without_a_point_se_takes_its_replicas_that_have_one_and_never_prints_nan():
+    """W = 60's point has no SE where one replica gave fewer than 10 blocks: the verdicts take
+    the replicas that have one ("1 of 2 runs"), or print the value alone and cannot tell."""
+    from granflow.studies.reproduce_000_report_claims import verdicts
+
+    values = _claims_values(1.385).filter(pl.col("phi_bar") == 0.60)
+    blind = values.with_columns(*(pl.when(pl.col("W") == 60.0).then(float("nan"))
+                                  .otherwise(pl.col(f"{c}_se")).alias(f"{c}_se")
+                                  for c in ("wall_friction", "omega_ratio_shearing")),
+                                wall_friction=pl.when(pl.col("W") == 60.0).then(0.25)
+                                .otherwise(pl.col("wall_friction")))
+    base = {"W": 60.0, "phi_bar": 0.60, "kn": 1e5, "B": 10.0, "H": 20.0, "parent": "",
+            "state": "steady"}
+    runs = pl.DataFrame([
+        {**base, "seed": 1, "wall_friction": 0.25, "wall_friction_se": 0.001,
+         "omega_ratio_shearing": 0.418, "omega_ratio_shearing_se": 0.001},
+        {**base, "seed": 2, "wall_friction": 0.26, "wall_friction_se": float("nan"),
+         "omega_ratio_shearing": 0.419, "omega_ratio_shearing_se": float("nan")}])
+    points = pl.concat([values.filter(pl.col("W") > 60).select(*POINT_BY).with_columns(
+        parent=pl.lit(""), state=pl.lit("steady"), seed=pl.lit(1)), runs],
+        how="diagonal_relaxed")
+    tab = verdicts(points, blind)
+    assert not any("nan" in str(c).lower() for c in tab.rows() for c in c), tab
+    got = {r["claim (000)"]: r for r in tab.iter_rows(named=True)}
+    mw = got["μ_wall independent of W"]
+    # (0.3 at W = 150 against 0.25 at W = 60: 0.05 over an SE of 1e-3 -- does not hold)
+    assert mw["measured here"] == "φ̄ = 0.6, W 60 → 150: +0.0500 ± 0.0010 (1 of 2 runs)", mw
+    assert mw["verdict"] == "does not hold"
+    om = got["Ω/ω → 1/2 in the shear zones"]
+    assert om["verdict"] == "does not hold" and "W = 60: 0.4180 ± 0.0010 (1 of 2 runs)" in \
+        om["measured here"], om
+    assert "SEs from 1/2 exactly" in om["why"]
+    # without a replica that has an SE: the value alone, no NaN, and cannot tell
+    tab = verdicts(points.with_columns(wall_friction_se=pl.lit(float("nan"))), blind)
+    mw = tab.filter(pl.col("claim (000)") == "μ_wall independent of W").row(0, named=True)
+    assert mw["measured here"] == "φ̄ = 0.6, W 60 → 150: +0.0500", mw
+    assert mw["verdict"] == "cannot tell at this scale" and "not enough data" in mw["why"]
+    # 1/2 within 000's "close to": 0.52 holds, though it is resolvably above 1/2 exactly
+    near = values.with_columns(omega_ratio_shearing=pl.lit(0.52))
+    om = verdicts(points, near).filter(pl.col("claim (000)") == "Ω/ω → 1/2 in the shear zones")
+    assert om["verdict"][0] == "holds", om
+
+
+def test_a_channel_without_a_plug_says_what_its_centre_shears_and_a_misfit_form_fails():
+    from granflow.studies.reproduce_000_report_claims import verdicts
+
+    values = _claims_values(1.385).filter(pl.col("phi_bar") == 0.60)
+    # W = 150: no plug bin (xi_plug at the centre), the centre shears of either sign
+    values = values.with_columns(
+        xi_plug=pl.when(pl.col("W") == 150.0).then(75.0).otherwise(10.0),
+        phi_plug=pl.when(pl.col("W") == 150.0).then(float("nan")).otherwise(0.63))
+    points = values.select("W", "phi_bar").with_columns(parent=pl.lit(""),
+                                                        state=pl.lit("steady"))
+    xi = np.arange(0.0, 75.0)
+    gd = np.where(np.arange(xi.size) % 2 == 0, 1e-3, -1e-3)
+    prof = pl.DataFrame({"W": 150.0, "parent": "", "xi": xi, "gamma_dot": gd,
+                         "gamma_dot_se": 1e-4, "zone": "dense", "phi": 0.63,
+                         **{c: 1.0 for c in ("p_phi", "mu_phi", "D_phi")},
+                         **{f"{c}_se": 0.1 for c in ("p_phi", "mu_phi", "D_phi")}})
+    tab = verdicts(points, values, prof)
+    plug = tab.filter(pl.col("claim (000)") == "plug φ ≈ 0.63").row(0, named=True)
+    assert plug["verdict"] == "cannot tell at this scale", plug
+    assert "W = 150: no plug: the central 37.5 d shear at |du/dx| ~ 1.0e-03 (10 SEs, " \
+        "median), of either sign" in plug["why"], plug
+    # loose-zone coefficients that a divergence does not describe (a power 2, tiny SEs)
+    phi = np.linspace(0.45, 0.58, 12)
+    y = 0.1 / (0.59 - phi) ** 2
+    loose = pl.DataFrame({"W": 60.0, "zone": "loose", "parent": "", "phi": phi,
+                          **{c: y for c in ("p_phi", "mu_phi", "D_phi")},
+                          **{f"{c}_se": 1e-3 * y for c in ("p_phi", "mu_phi", "D_phi")}})
+    r = verdicts(points, values, loose).filter(
+        pl.col("claim (000)") == "φ_ad: the kinetic coefficients diverge at 0.59 ± 0.002 "
+        "(fig. 13)").row(0, named=True)
+    assert r["verdict"] == "does not hold" and "misfits its 12 bins" in r["why"], r
+
+
+def test_the_per_width_ratio_says_which_side_of_000s_range_it_lies():
+    from granflow.studies.reproduce_000_report import ratio_by_width
+
+    values = _claims_values(1.385).filter(pl.col("phi_bar") == 0.60).with_columns(
+        ratio_how=pl.lit(""), u_max_over_u_slip=pl.Series([1.30, 1.385, 1.45]))
+    gap = ratio_by_width(values)["outside 1.37-1.40 by"].to_list()
+    assert gap == pytest.approx([-0.07, 0.0, 0.05])
 
 
 def test_the_report_of_a_campaign_not_yet_begun(tmp_path):

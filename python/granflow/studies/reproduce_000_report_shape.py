@@ -12,7 +12,8 @@ here where its shape passes its own test; its v_cm state must be a flowing one."
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import polars as pl
 
@@ -66,6 +67,18 @@ def own_values(points: pl.DataFrame, by: Sequence[str]) -> pl.DataFrame:
     return rm.join(extra, on=list(by), how="left").sort(list(by))
 
 
+def _g2(v: float | None) -> str:
+    """An SE to two significant figures, ``-`` where there is none (one replica: no
+    between-replica SE)."""
+    return "-" if v is None or not math.isfinite(v) else f"{v:.2g}"
+
+
+def _kn(row: Mapping[str, Any]) -> dict[str, str]:
+    """The k_n cell of a point's row where the point has one (the stiffness branches share
+    W and phi_bar with their parents)."""
+    return {"k_n": f"{row['kn']:.0e}"} if row.get("kn") is not None else {}
+
+
 def shape_lines(points: pl.DataFrame, by: Sequence[str]) -> list[str]:
     """The section: per point, the shape quantities on their own correlation times beside
     the level's (``tau_max``), and the replicas' agreement; none without such runs."""
@@ -79,11 +92,11 @@ def shape_lines(points: pl.DataFrame, by: Sequence[str]) -> list[str]:
         vals = vals.join(lvl, on=list(by), how="left")
     rows = []
     for v in vals.iter_rows(named=True):
-        rows.append({"W": v["W"], "φ̄": v["phi_bar"], "runs": v["replicas"],
+        rows.append({"W": v["W"], "φ̄": v["phi_bar"], **_kn(v), "runs": v["replicas"],
                      "states": v["states"],
                      "u_max/u_slip": pm(v[r], v[f"{r}_se"], 4),
-                     "within / between": f"{v[f'{r}_se_within']:.2g} / "
-                                         f"{v[f'{r}_se_between']:.2g}",
+                     "within / between": " / ".join(
+                         _g2(v[f"{r}_se_{k}"]) for k in ("within", "between")),
                      "τ": f"{v[f'{r}_tau']:.1f}", "blocks": v[f"{r}_blocks"],
                      "δ0.95": pm(v[dl], v[f"{dl}_se"], 3),
                      "τ δ0.95": f"{v[f'{dl}_tau']:.1f}",
@@ -107,7 +120,9 @@ def shape_lines(points: pl.DataFrame, by: Sequence[str]) -> list[str]:
     if pz.height:
         lines += ["Pairs of runs of a point, their difference over its combined SE (1 for "
                   "honest SEs): " + "; ".join(
-                      f"W = {p['W']:g}, φ̄ = {p['phi_bar']:g} (seeds {p['seed_a']}, "
+                      f"W = {p['W']:g}, φ̄ = {p['phi_bar']:g}"
+                      + "".join(f", k_n = {k}" for k in _kn(p).values())
+                      + f" (seeds {p['seed_a']}, "
                       f"{p['seed_b']}): u_max/u_slip z = {p[f'z_{r}']:+.1f}, δ0.95 z = "
                       f"{p[f'z_{dl}']:+.1f}" for p in pz.iter_rows(named=True)) + ".", ""]
     return lines

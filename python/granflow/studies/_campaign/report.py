@@ -32,11 +32,13 @@ def md_table(df: pl.DataFrame, fmt: Mapping[str, str] | None = None) -> str:
     return "\n".join([head, sep, *body])
 
 
-def pm(v: float, e: float, digits: int = 3) -> str:
-    """``v ± e`` with ``digits`` decimals (``-`` for NaN; ``v`` alone without an error)."""
+def pm(v: float, e: float, digits: int = 3, *, signed: bool = False) -> str:
+    """``v ± e`` with ``digits`` decimals (``-`` for NaN; ``v`` alone without an error);
+    ``signed``: ``v`` with its sign (a change)."""
     if not math.isfinite(v):
         return "-"
-    return f"{v:.{digits}f} ± {e:.{digits}f}" if math.isfinite(e) else f"{v:.{digits}f}"
+    val = f"{v:+.{digits}f}" if signed else f"{v:.{digits}f}"
+    return f"{val} ± {e:.{digits}f}" if math.isfinite(e) else val
 
 
 def span(lo: float, hi: float, spec: str = ".3g") -> str:
