@@ -64,7 +64,8 @@ def judge(value: float, se: float, lo: float, hi: float,
     z = interval_z(value, se, lo, hi)
     if not math.isfinite(z):
         return "cannot tell at this scale", NED
-    far = f"{z:.1f} SEs from {lo:g}" + (f"-{hi:g}" if hi != lo else "")
+    interval = f"{lo:g}" + (f"-{hi:g}" if hi != lo else "")
+    far = f"inside {interval}" if z == 0 and hi != lo else f"{z:.1f} SEs from {interval}"
     if not agrees(z):
         return "does not hold", far
     if resolve is not None and resolve[0] > resolve[1]:
