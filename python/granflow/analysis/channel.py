@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 import polars as pl
 from scipy import optimize
+from scipy.stats import chi2 as chi2_law
 
 from ._numerics import quiet
 from .binned import bin_matrix, profile_se
@@ -769,14 +770,16 @@ def fit_phi_ad(phi: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike) -> dic
     D_phi of the loose shearing zone diverge as chi = (phi_ad - phi)^-1; the paper finds
     phi_ad = 0.59 +- 0.002) to loose-zone bins, in log y (the coefficients span decades)
     weighted by the per-bin relative SE. Returns phi_ad, its SE (covariance scaled by
-    sqrt(chi2/dof) where that exceeds 1), A, chi2_per_dof and n; NaN with fewer than 3 bins."""
+    sqrt(chi2/dof) where that exceeds 1), A, chi2_per_dof, chi2_p (the chance of a chi2 this
+    large were the form right: a small one says the form does not describe the bins) and n;
+    NaN with fewer than 3 bins."""
     ph = np.asarray(phi, dtype=np.float64)
     yy = np.asarray(y, dtype=np.float64)
     ee = np.asarray(y_se, dtype=np.float64)
     ok = np.isfinite(ph) & np.isfinite(yy) & (yy > 0) & np.isfinite(ee) & (ee > 0)
     ph, yy, ee = ph[ok], yy[ok], ee[ok]
     nan = {"phi_ad": math.nan, "phi_ad_se": math.nan, "A": math.nan,
-           "chi2_per_dof": math.nan, "n": int(ph.size)}
+           "chi2_per_dof": math.nan, "chi2_p": math.nan, "n": int(ph.size)}
     if ph.size < 3:
         return nan
     sig = ee / yy
@@ -796,4 +799,5 @@ def fit_phi_ad(phi: npt.ArrayLike, y: npt.ArrayLike, y_se: npt.ArrayLike) -> dic
     dof = max(1, ph.size - 2)
     scale = math.sqrt(max(1.0, chi2 / dof))
     return {"phi_ad": float(popt[1]), "phi_ad_se": float(math.sqrt(pcov[1, 1]) * scale),
-            "A": float(math.exp(popt[0])), "chi2_per_dof": chi2 / dof, "n": int(ph.size)}
+            "A": float(math.exp(popt[0])), "chi2_per_dof": chi2 / dof,
+            "chi2_p": float(chi2_law.sf(chi2, dof)), "n": int(ph.size)}

@@ -34,6 +34,7 @@ from ._campaign import (
     plot_campaign_se,
     pm,
     point_of,
+    sig,
 )
 from .reproduce_000_figures import (
     plot_fig4,
@@ -164,8 +165,7 @@ def se_parts_table(steady: pl.DataFrame, cols: Sequence[str] = REPORTED) -> pl.D
         row: dict[str, Any] = {"W": r["W"], "φ̄": r["phi_bar"], "replicas": r["replicas"]}
         for c in cols:
             w, b = r.get(f"{c}_se_within", math.nan), r.get(f"{c}_se_between", math.nan)
-            row[c] = " / ".join("-" if v is None or not math.isfinite(v) else f"{v:.2g}"
-                                for v in (w, b))
+            row[c] = " / ".join(sig(v) for v in (w, b))
         rows.append(row)
     return pl.DataFrame(rows)
 

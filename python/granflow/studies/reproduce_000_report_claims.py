@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 import polars as pl
-from scipy import stats
 
 from granflow.analysis.channel import L_C_PAPER, fit_phi_ad
 from granflow.analysis.compare import AGREE_SIGMA, agrees, interval_z
@@ -320,16 +319,12 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
                                  resolve=(f["phi_ad_se"], PHI_AD_PAPER[1]))
             # (a form that misfits its bins locates no divergence, whatever its phi_ad: the
             # SE above is widened by sqrt(chi2/dof) and the location is given, not judged)
-            dof = f["n"] - 2
-            if dof > 0 and math.isfinite(f["chi2_per_dof"]) and \
-                    stats.chi2.sf(f["chi2_per_dof"] * dof, dof) < FORM_P:
+            if f["chi2_p"] < FORM_P:
                 verdict = "does not hold"
                 far = (f"A/(φ_ad - φ) misfits its {f['n']} bins, χ²/dof = "
                        f"{f['chi2_per_dof']:.3g} (φ_ad {far})")
             fits.append((name.split(" ")[0], v, e, verdict, far))
-        verdict = ("does not hold" if any(j[3] == "does not hold" for j in fits)
-                   else "holds" if all(j[3] == "holds" for j in fits)
-                   else "cannot tell at this scale")
+        verdict = combined([j[3] for j in fits])
         add("φ_ad: the kinetic coefficients diverge at 0.59 ± 0.002 (fig. 13)",
             "0.59 ± 0.002", "; ".join(f"{n}: {pm(v, e, 4)}" for n, v, e, *_ in fits),
             verdict, "; ".join(f"{n}: {far}" for n, _, _, _, far in fits)

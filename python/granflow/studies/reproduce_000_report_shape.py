@@ -22,7 +22,7 @@ from granflow.analysis.coverage import pair_z
 from granflow.analysis.replicas import replica_mean
 from granflow.states import FlowState
 
-from ._campaign import md_table, pm
+from ._campaign import md_table, pm, sig
 
 #: the row columns of a shape quantity ``X`` on its own correlation time
 OWN = "{}_own"
@@ -67,12 +67,6 @@ def own_values(points: pl.DataFrame, by: Sequence[str]) -> pl.DataFrame:
     return rm.join(extra, on=list(by), how="left").sort(list(by))
 
 
-def _g2(v: float | None) -> str:
-    """An SE to two significant figures, ``-`` where there is none (one replica: no
-    between-replica SE)."""
-    return "-" if v is None or not math.isfinite(v) else f"{v:.2g}"
-
-
 def _kn(row: Mapping[str, Any]) -> dict[str, str]:
     """The k_n cell of a point's row where the point has one (the stiffness branches share
     W and phi_bar with their parents)."""
@@ -96,7 +90,7 @@ def shape_lines(points: pl.DataFrame, by: Sequence[str]) -> list[str]:
                      "states": v["states"],
                      "u_max/u_slip": pm(v[r], v[f"{r}_se"], 4),
                      "within / between": " / ".join(
-                         _g2(v[f"{r}_se_{k}"]) for k in ("within", "between")),
+                         sig(v[f"{r}_se_{k}"]) for k in ("within", "between")),
                      "τ": f"{v[f'{r}_tau']:.1f}", "blocks": v[f"{r}_blocks"],
                      "δ0.95": pm(v[dl], v[f"{dl}_se"], 3),
                      "τ δ0.95": f"{v[f'{dl}_tau']:.1f}",

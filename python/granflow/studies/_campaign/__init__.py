@@ -36,6 +36,7 @@ from .report import (
     pm,
     pm_column,
     run_seconds,
+    sig,
     sig_text,
     span,
     span_of,
@@ -44,5 +45,5 @@ from .report import (
 __all__ = ["ERROR_STATES", "Study", "add_final_rows", "cli", "core_seconds", "cost",
            "dask_recipe", "done_keys", "error_state", "fmt", "keys_done", "md_table",
            "paper_scale_estimate", "plot_campaign_se", "pm", "pm_column", "point_of",
-           "reanalyse", "run_point", "run_points", "run_seconds", "sig_text", "span", "span_of",
-           "write_rows"]
+           "reanalyse", "run_point", "run_points", "run_seconds", "sig", "sig_text", "span",
+           "span_of", "write_rows"]

@@ -58,6 +58,12 @@ def pm_column(value: str, se: str, name: str, digits: int = 4) -> pl.Expr:
                                              return_dtype=pl.String).alias(name)
 
 
+def sig(v: float | None, digits: int = 2) -> str:
+    """``v`` to ``digits`` significant figures, ``-`` where it is None or NaN (as
+    :func:`md_table` writes a float): the scalar form of :func:`sig_text`."""
+    return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}g}"
+
+
 def sig_text(column: str, digits: int = 2) -> pl.Expr:
     """``column`` as text rounded to ``digits`` significant figures, ``-`` where it is NaN or
     null (as :func:`md_table` writes a float): for numbers formatted inside a text cell."""
