@@ -430,6 +430,11 @@ def test_a_claim_without_a_point_se_takes_its_replicas_that_have_one_and_never_p
     assert om["verdict"] == "does not hold" and "W = 60: 0.4180 ± 0.0010 (1 of 2 runs)" in \
         om["measured here"], om
     assert "SEs from 1/2 exactly" in om["why"]
+    # the replica's run SE takes the coverage audit's shortfall, as a one-replica point does
+    mw = verdicts(points, blind, factors={"wall_friction": 2.0}).filter(
+        pl.col("claim (000)") == "μ_wall independent of W").row(0, named=True)
+    assert mw["measured here"] == ("φ̄ = 0.6, W 60 → 150: +0.0500 ± 0.0020 (1 of 2 runs, "
+                                   "SE × 2.00 by the audit)"), mw
     # without a replica that has an SE: the value alone, no NaN, and cannot tell
     tab = verdicts(points.with_columns(wall_friction_se=pl.lit(float("nan"))), blind)
     mw = tab.filter(pl.col("claim (000)") == "μ_wall independent of W").row(0, named=True)

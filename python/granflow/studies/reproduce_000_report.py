@@ -907,8 +907,8 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
     profiles = _of_steady(points, refuse_few_blocks(raw, _read(out, "profiles")))
     zones = _of_steady(points, refuse_few_blocks(raw, _read(out, "zones")))
     audit = coverage_table(points) if points.height else pl.DataFrame()
-    every_depth = point_values(points, audit_factors(audit)) if points.height \
-        else pl.DataFrame()
+    factors = audit_factors(audit)
+    every_depth = point_values(points, factors) if points.height else pl.DataFrame()
     values = main_depth(every_depth)
     steady = main_steady(values)
     means = mean_profiles(profiles)
@@ -920,7 +920,7 @@ def write_report(out: Path, path: Path, plan: Any, paper: Any) -> Path:
              f"`pl.read_parquet('{out}/points.parquet')` (one row per run; also "
              "`profiles.parquet`, half profiles with SEs and zone labels, `zones.parquet`, "
              "zone means, and `se_vs_time.parquet`). Section numbers (§) are 000's.", "",
-             *verdict_lines(points, values, profiles), *findings(points, values),
+             *verdict_lines(points, values, profiles, factors), *findings(points, values),
              *_depth_section(every_depth), *_runs_section(points, plan)]
     figs: list[Path] = []
     sections = [_stiffness_section(points, values, profiles, means, zones, figdir),

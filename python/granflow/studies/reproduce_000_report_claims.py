@@ -5,6 +5,7 @@ value and the reason (:func:`verdicts`), and the report's section of them."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -93,11 +94,14 @@ def replica_rows(points: pl.DataFrame, rows: pl.DataFrame) -> pl.DataFrame:
         keys, on=list(POINT_BY), how="semi")
 
 
-def value_at(rows: pl.DataFrame, points: pl.DataFrame, col: str) -> tuple[float, float, str]:
+def value_at(rows: pl.DataFrame, points: pl.DataFrame, col: str,
+             factors: Mapping[str, float] | None = None) -> tuple[float, float, str]:
     """``col`` of the point rows ``rows`` (one width, its phi_bar) with its SE (:func:`pooled`)
     and how it was got. A point one of whose replicas gave fewer than MIN_SE_BLOCKS blocks has
     no SE (replica_mean); then the value is pooled over the replicas that have one, said as
-    " (k of n runs)" (their own SEs), "" otherwise."""
+    " (k of n runs)", their SE times ``factors[col]`` (:func:`audit_factors`: the shortfall
+    of run SEs the coverage audit measures, as point_values applies it to a one-replica
+    point), "" otherwise."""
     se = f"{col}_se"
     if rows[se].is_finite().fill_null(False).all():
         return (*pooled(rows, col), "")
@@ -106,7 +110,10 @@ def value_at(rows: pl.DataFrame, points: pl.DataFrame, col: str) -> tuple[float,
         ok = runs.filter(pl.col(col).is_finite().fill_null(False)
                          & pl.col(se).is_finite().fill_null(False))
         if ok.height:
-            return (*pooled(ok, col), f" ({ok.height} of {runs.height} runs)")
+            m, e = pooled(ok, col)
+            f = (factors or {}).get(col, 1.0)
+            return m, e * f, (f" ({ok.height} of {runs.height} runs"
+                              + (f", SE × {f:.2f} by the audit)" if f != 1.0 else ")"))
     return (*pooled(rows, col), "")
 
 
@@ -198,7 +205,8 @@ def ratio_how(points: pl.DataFrame) -> str:
 
 
 def verdicts(points: pl.DataFrame, values: pl.DataFrame,
-             profiles: pl.DataFrame | None = None) -> pl.DataFrame:
+             profiles: pl.DataFrame | None = None,
+             factors: Mapping[str, float] | None = None) -> pl.DataFrame:
     """000's claims, each "holds", "does not hold" (the measured value more
     than AGREE_SIGMA SEs outside 000's interval) or "cannot tell at this scale" (no point at
     000's widths, or no SE), with the measured value and the reason. At 000's widths only:
@@ -274,7 +282,7 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
             continue
         rows_ = []
         for (w,), g in wide.sort("W").group_by(["W"], maintain_order=True):
-            m, e, how = value_at(g, points, col)
+            m, e, how = value_at(g, points, col, factors)
             verdict, far = judge(m, e, lo, hi)
             if far == NED and col != "omega_ratio_shearing" and w in no_plug:
                 far = no_plug[w]
@@ -290,7 +298,8 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     for (phi,), g in wide.sort("W").group_by(["phi_bar"], maintain_order=True):
         if g.height >= 2:
             (v0, e0, h0), (v1, e1, h1) = (value_at(g.filter(pl.col("W") == g["W"][i]),
-                                                   points, "wall_friction") for i in (0, -1))
+                                                   points, "wall_friction", factors)
+                                          for i in (0, -1))
             mw.append((phi, g["W"][0], g["W"][-1], v1 - v0, math.hypot(e0, e1), h0 + h1))
     if mw:
         zs = [dv / e for *_, dv, e, _ in mw]
@@ -357,12 +366,13 @@ def verdicts(points: pl.DataFrame, values: pl.DataFrame,
     return pl.DataFrame(rows)
 
 
-def verdict_lines(points: pl.DataFrame, values: pl.DataFrame,
-                     profiles: pl.DataFrame) -> list[str]:
-    """000's claims, one line each (:func:`verdicts`)."""
+def verdict_lines(points: pl.DataFrame, values: pl.DataFrame, profiles: pl.DataFrame,
+                  factors: Mapping[str, float] | None = None) -> list[str]:
+    """000's claims, one line each (:func:`verdicts`; ``factors``: the coverage audit's,
+    :func:`audit_factors`)."""
     if not points.height:
         return []
-    tab = verdicts(points, values, profiles if profiles.height else None)
+    tab = verdicts(points, values, profiles if profiles.height else None, factors)
     drifts = drift_reasons(points, values)
     count = {v: int((tab["verdict"] == v).sum())
              for v in ("holds", "does not hold", "cannot tell at this scale")}
